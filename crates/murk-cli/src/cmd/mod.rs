@@ -1,0 +1,5 @@
+//! One module per subcommand: clap arguments and a `run` that calls the libraries.
+
+pub mod campaign;
+pub mod convert;
+pub mod generate;

@@ -1,0 +1,46 @@
+//! `murk`: the command-line front end of murk.
+//!
+//! This binary is glue: it parses flags with clap, turns them into the
+//! libraries' checked settings, calls the libraries and maps errors to a
+//! message and an exit code. No statistics or file formats live here.
+//!
+//! ```text
+//! murk generate --out fixtures/default-campaign --seed 7
+//! murk campaign summary fixtures/default-campaign
+//! murk convert scan.pcap --out frames/ --format pcd
+//! ```
+
+use clap::{Parser, Subcommand};
+
+mod cmd;
+
+/// Data-driven weather noise models for automotive LiDAR.
+#[derive(Parser, Debug)]
+#[command(name = "murk", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Convert point clouds between formats (a pcap becomes one file per frame).
+    Convert(cmd::convert::Args),
+    /// Inspect a campaign folder.
+    Campaign(cmd::campaign::Args),
+    /// Generate a synthetic campaign whose truth is known.
+    Generate(cmd::generate::Args),
+}
+
+fn main() {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Convert(a) => cmd::convert::run(a),
+        Command::Campaign(a) => cmd::campaign::run(a),
+        Command::Generate(a) => cmd::generate::run(a),
+    };
+    if let Err(e) = result {
+        eprintln!("murk: error: {e:#}");
+        std::process::exit(1);
+    }
+}

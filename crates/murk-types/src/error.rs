@@ -1,0 +1,31 @@
+//! The error type of this crate.
+
+/// Errors raised while validating or parsing shared types.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum TypesError {
+    /// An intensity-scale name or table that murk does not know.
+    #[error(
+        "unknown intensity scale {0:?}: expected one of calibrated, vlp16, kitti, unit, nuscenes, byte, six-bit, or {{ gain = G, offset = O }}"
+    )]
+    UnknownIntensityScale(String),
+    /// A weather class name that is not clear, fog, rain or snow.
+    #[error("unknown weather class {0:?}: expected clear, fog, rain or snow")]
+    UnknownWeather(String),
+    /// A file extension that no reader handles.
+    #[error(
+        "{path}: unknown point-cloud format (extension {ext:?}); expected .pcd, .bin, .pcd.bin, .csv, .parquet or .pcap"
+    )]
+    UnknownFormat {
+        /// The offending path.
+        path: String,
+        /// Its extension as seen.
+        ext: String,
+    },
+    /// A sensor description that cannot be used.
+    #[error("invalid lidar description: {0}")]
+    InvalidLidar(String),
+    /// Columns of a point cloud with different lengths.
+    #[error("point cloud columns disagree: {0}")]
+    RaggedCloud(String),
+}

@@ -1,0 +1,48 @@
+//! Shared data types of murk: the values every other crate passes around.
+//!
+//! murk fits weather noise models for automotive LiDAR from field campaigns
+//! and applies them to clear-weather data. The pieces that cross crate
+//! boundaries live here so that readers, fitters and appliers agree on them
+//! without depending on each other:
+//!
+//! - [`PointCloud`]: a structure-of-arrays LiDAR scan (x, y, z, intensity,
+//!   ring, optional time) in the sensor frame, metres, x forward, y left, z up.
+//! - [`IntensityScale`]: how a sensor's raw intensity maps onto calibrated
+//!   VLP-16 reflectivity (0–100 diffuse, 101–255 retro-reflective), the scale
+//!   in which every reflectivity band of murk is expressed.
+//! - [`LidarSpec`]: the sensor metadata of a campaign (ring elevations,
+//!   azimuth resolution, range scale), with the ring-from-elevation rule used
+//!   for formats that carry no ring.
+//! - [`PointFormat`]: the point-cloud file formats murk reads and writes.
+//! - [`WeatherClass`]: clear, fog, rain, snow.
+//!
+//! ```
+//! use murk_types::{IntensityScale, LidarSpec, PointCloud};
+//!
+//! let mut cloud = PointCloud::with_capacity(2);
+//! cloud.push(10.0, 0.0, -1.0, 0.5, 0);
+//! cloud.push(0.0, 20.0, 0.0, 0.9, 0);
+//! cloud.intensity_scale = IntensityScale::KITTI;
+//! cloud.to_calibrated();
+//! assert_eq!(cloud.intensity, vec![127.5, 229.5]);
+//! assert_eq!(cloud.intensity_scale, IntensityScale::Calibrated);
+//!
+//! let vlp16 = LidarSpec::vlp16();
+//! // A point 1° above the horizon belongs to ring 2 of the VLP-16.
+//! let ring = vlp16.ring_from_elevation(1.0_f32.to_radians()).unwrap();
+//! assert_eq!(vlp16.elevation_deg[ring as usize], 1.0);
+//! ```
+
+mod cloud;
+mod error;
+mod format;
+mod intensity;
+mod lidar;
+mod weather;
+
+pub use cloud::PointCloud;
+pub use error::TypesError;
+pub use format::PointFormat;
+pub use intensity::IntensityScale;
+pub use lidar::LidarSpec;
+pub use weather::WeatherClass;

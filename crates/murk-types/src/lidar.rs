@@ -1,0 +1,191 @@
+//! Sensor metadata of a campaign's LiDAR.
+
+use serde::{Deserialize, Serialize};
+
+use crate::{IntensityScale, TypesError};
+
+/// The LiDAR of a campaign (`[lidar]` in `campaign.toml`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LidarSpec {
+    /// Free-text model name (`VLP16`, `OS1-64`, …).
+    pub model: String,
+    /// Sensor range-scale coefficient (1.0 for the VLP-16, 0.9 for the
+    /// Ouster OS1 in the seed's library); multiplies vanishing distances.
+    #[serde(default = "one")]
+    pub range_scale: f64,
+    /// Elevation of each ring, degrees, indexed by ring id.
+    pub elevation_deg: Vec<f64>,
+    /// Horizontal angular step between firings, degrees.
+    #[serde(default = "default_az")]
+    pub azimuth_resolution_deg: f64,
+    /// Maximum range of the sensor, metres.
+    #[serde(default = "default_max_range")]
+    pub max_range_m: f64,
+    /// Scale of the `intensity` stored in this campaign's files; absent means
+    /// the format's default (calibrated for PCD/CSV/Parquet, KITTI for `.bin`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub intensity_scale: Option<IntensityScale>,
+}
+
+fn one() -> f64 {
+    1.0
+}
+fn default_az() -> f64 {
+    0.2
+}
+fn default_max_range() -> f64 {
+    100.0
+}
+
+/// VLP-16 ring elevations by laser id (degrees), from the sensor manual.
+pub const VLP16_ELEVATION_DEG: [f64; 16] = [
+    -15.0, 1.0, -13.0, 3.0, -11.0, 5.0, -9.0, 7.0, -7.0, 9.0, -5.0, 11.0, -3.0, 13.0, -1.0, 15.0,
+];
+
+impl LidarSpec {
+    /// The Velodyne VLP-16 as the PDD site used it.
+    pub fn vlp16() -> Self {
+        LidarSpec {
+            model: "VLP16".into(),
+            range_scale: 1.0,
+            elevation_deg: VLP16_ELEVATION_DEG.to_vec(),
+            azimuth_resolution_deg: 0.2,
+            max_range_m: 100.0,
+            intensity_scale: None,
+        }
+    }
+
+    /// Checks the values a model depends on.
+    pub fn validate(&self) -> Result<(), TypesError> {
+        let bad = |m: String| Err(TypesError::InvalidLidar(m));
+        if self.elevation_deg.is_empty() {
+            return bad("elevation_deg is empty".into());
+        }
+        if self.elevation_deg.len() > u16::MAX as usize {
+            return bad(format!(
+                "{} rings is more than murk supports",
+                self.elevation_deg.len()
+            ));
+        }
+        if let Some(e) = self
+            .elevation_deg
+            .iter()
+            .find(|e| !e.is_finite() || e.abs() > 90.0)
+        {
+            return bad(format!(
+                "elevation {e} is not an angle in [-90, 90] degrees"
+            ));
+        }
+        if !(self.range_scale.is_finite() && self.range_scale > 0.0) {
+            return bad(format!("range_scale {} must be > 0", self.range_scale));
+        }
+        if !(self.azimuth_resolution_deg.is_finite() && self.azimuth_resolution_deg > 0.0) {
+            return bad(format!(
+                "azimuth_resolution_deg {} must be > 0",
+                self.azimuth_resolution_deg
+            ));
+        }
+        if !(self.max_range_m.is_finite() && self.max_range_m > 0.0) {
+            return bad(format!("max_range_m {} must be > 0", self.max_range_m));
+        }
+        Ok(())
+    }
+
+    /// Number of rings.
+    pub fn rings(&self) -> usize {
+        self.elevation_deg.len()
+    }
+
+    /// The ring whose elevation is nearest to `elevation_rad`.
+    pub fn nearest_ring(&self, elevation_rad: f32) -> u16 {
+        let e = elevation_rad.to_degrees() as f64;
+        let mut best = 0usize;
+        let mut best_d = f64::INFINITY;
+        for (i, &r) in self.elevation_deg.iter().enumerate() {
+            let d = (r - e).abs();
+            if d < best_d {
+                best_d = d;
+                best = i;
+            }
+        }
+        best as u16
+    }
+
+    /// The ring of a point at `elevation_rad`, or `None` when the point lies
+    /// more than half the smallest ring spacing (at least 0.5°) from every ring.
+    pub fn ring_from_elevation(&self, elevation_rad: f32) -> Option<u16> {
+        let ring = self.nearest_ring(elevation_rad);
+        let e = elevation_rad.to_degrees() as f64;
+        let d = (self.elevation_deg.get(ring as usize)? - e).abs();
+        (d <= self.ring_tolerance_deg()).then_some(ring)
+    }
+
+    /// Half the smallest gap between two ring elevations, at least 0.5°.
+    pub fn ring_tolerance_deg(&self) -> f64 {
+        let mut s = self.elevation_deg.clone();
+        s.sort_by(f64::total_cmp);
+        let gap = s
+            .windows(2)
+            .map(|w| w[1] - w[0])
+            .filter(|g| *g > 0.0)
+            .fold(f64::INFINITY, f64::min);
+        if gap.is_finite() {
+            (gap / 2.0).max(0.5)
+        } else {
+            0.5
+        }
+    }
+
+    /// Number of azimuth bins of one revolution.
+    pub fn azimuth_bins(&self) -> usize {
+        (360.0 / self.azimuth_resolution_deg).round().max(1.0) as usize
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn vlp16_rings_round_trip() {
+        let s = LidarSpec::vlp16();
+        s.validate().unwrap();
+        for (i, e) in VLP16_ELEVATION_DEG.iter().enumerate() {
+            let r = (*e as f32 + 0.3).to_radians();
+            assert_eq!(s.ring_from_elevation(r), Some(i as u16));
+        }
+        assert_eq!(s.ring_from_elevation(40f32.to_radians()), None);
+        assert_eq!(s.nearest_ring(40f32.to_radians()), 15);
+        assert_eq!(s.azimuth_bins(), 1800);
+    }
+
+    #[test]
+    fn invalid_spec_is_named() {
+        let mut s = LidarSpec::vlp16();
+        s.range_scale = 0.0;
+        assert!(
+            s.validate()
+                .unwrap_err()
+                .to_string()
+                .contains("range_scale")
+        );
+    }
+
+    #[test]
+    fn serde_form_of_campaign_format() {
+        let s: LidarSpec = serde_json::from_str(
+            r#"{"model":"VLP16","range_scale":1.0,"elevation_deg":[-15.0,1.0],
+                "azimuth_resolution_deg":0.2,"max_range_m":100.0,"intensity_scale":"kitti"}"#,
+        )
+        .unwrap();
+        assert_eq!(s.rings(), 2);
+        assert_eq!(s.intensity_scale, Some(IntensityScale::KITTI));
+        let e = serde_json::from_str::<LidarSpec>(
+            r#"{"model":"X","elevation_deg":[0.0],"rnage_scale":1}"#,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("rnage_scale"), "{e}");
+    }
+}
