@@ -30,6 +30,8 @@ enum Command {
     Campaign(cmd::campaign::Args),
     /// Generate a synthetic campaign whose truth is known.
     Generate(cmd::generate::Args),
+    /// Fit the weather noise models of a campaign into a coefficient table.
+    Fit(cmd::fit::Args),
 }
 
 fn main() {
@@ -38,6 +40,7 @@ fn main() {
         Command::Convert(a) => cmd::convert::run(a),
         Command::Campaign(a) => cmd::campaign::run(a),
         Command::Generate(a) => cmd::generate::run(a),
+        Command::Fit(a) => cmd::fit::run(a),
     };
     if let Err(e) = result {
         eprintln!("murk: error: {e:#}");

@@ -2,4 +2,5 @@
 
 pub mod campaign;
 pub mod convert;
+pub mod fit;
 pub mod generate;
