@@ -28,4 +28,15 @@ pub enum TypesError {
     /// Columns of a point cloud with different lengths.
     #[error("point cloud columns disagree: {0}")]
     RaggedCloud(String),
+    /// A coefficient table that cannot be parsed or fails validation.
+    #[error("{path}: coefficient table, {location}: {reason}")]
+    Table {
+        /// The table file (`<memory>` when parsed from a string).
+        path: String,
+        /// Where: a field path (`weathers.fog.vanishing_slope[1].slope`) or
+        /// `line L column C` for syntax errors.
+        location: String,
+        /// What is wrong.
+        reason: String,
+    },
 }

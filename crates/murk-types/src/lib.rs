@@ -15,6 +15,8 @@
 //!   for formats that carry no ring.
 //! - [`PointFormat`]: the point-cloud file formats murk reads and writes.
 //! - [`WeatherClass`]: clear, fog, rain, snow.
+//! - [`CoefficientTable`]: the fitted weather-noise coefficients
+//!   (`weather-noise-coefficients/1`), the contract between fit and apply.
 //!
 //! ```
 //! use murk_types::{IntensityScale, LidarSpec, PointCloud};
@@ -38,6 +40,7 @@ mod error;
 mod format;
 mod intensity;
 mod lidar;
+mod table;
 mod weather;
 
 pub use cloud::PointCloud;
@@ -45,4 +48,9 @@ pub use error::TypesError;
 pub use format::PointFormat;
 pub use intensity::IntensityScale;
 pub use lidar::LidarSpec;
+pub use table::{
+    ClearCoefficients, CoefficientTable, CountLaw, ExcludedRecording, Gaussian, InputDigest,
+    MorBin, NoiseLaw, Provenance, RadarCoefficients, RainConversion, SlopeBand, SurvivalFit,
+    SweepBand, TABLE_FORMAT, TableLidar, Uncertainty, WeatherCoefficients,
+};
 pub use weather::WeatherClass;
