@@ -67,7 +67,7 @@ fn binary_pcd_in_any_field_order_and_type_reads_exactly() {
     let mut b = header.as_bytes().to_vec();
     let rows: [(u8, u16, f64, u8, i16, f32, f64); 2] = [
         (200, 7, 1.25, 9, -3, 0.5, 1_700_000_000.0),
-        (4, 12, -8.5, 9, 40, -1.0, 1_700_000_000.0625),
+        (4, 12, -8.5, 9, 40, -1.0, 1_700_000_000.062_5),
     ];
     for (i, r, x, rt, y, z, t) in rows {
         b.push(i);
