@@ -20,7 +20,7 @@ const POINTS: usize = 1 << 20;
 fn read(c: &mut Criterion) {
     let dir = tempfile::tempdir().expect("temp dir");
     let cloud = common::synthetic(POINTS, true);
-    let cases = [
+    let mut cases = vec![
         ("pcd-binary", PointFormat::Pcd, PcdData::Binary),
         (
             "pcd-binary_compressed",
@@ -31,8 +31,10 @@ fn read(c: &mut Criterion) {
         ("kitti-bin", PointFormat::KittiBin, PcdData::Binary),
         ("nuscenes-bin", PointFormat::NuscenesBin, PcdData::Binary),
         ("csv", PointFormat::Csv, PcdData::Binary),
-        ("parquet", PointFormat::Parquet, PcdData::Binary),
     ];
+    if cfg!(feature = "parquet") {
+        cases.push(("parquet", PointFormat::Parquet, PcdData::Binary));
+    }
     let mut group = c.benchmark_group("read");
     group
         .sample_size(10)

@@ -10,7 +10,11 @@
 //!   file in the target folder, then a rename), byte-identically for
 //!   identical clouds.
 //! - [`parse_pcd`], [`parse_kitti`], [`parse_nuscenes`], [`parse_csv`],
-//!   [`parse_parquet`] parse bytes already in memory (fuzzing, benches).
+//!   `parse_parquet` parse bytes already in memory (fuzzing, benches).
+//!
+//! Parquet support (polars) is the default feature `parquet`; without it the
+//! Parquet format is an error and the crate builds in a fraction of the time
+//! (the fuzz targets use that).
 //!
 //! | format | read | write |
 //! |---|---|---|
@@ -65,6 +69,7 @@ mod options;
 mod pcap;
 mod pcd;
 mod ring;
+#[cfg(feature = "parquet")]
 mod table;
 mod text;
 
@@ -77,6 +82,7 @@ pub use bin_records::{parse_kitti, parse_nuscenes};
 pub use error::IoError;
 pub use options::{PcdData, ReadOptions, WriteOptions};
 pub use pcd::parse_pcd;
+#[cfg(feature = "parquet")]
 pub use table::parse_parquet;
 pub use text::parse_csv;
 
@@ -123,6 +129,7 @@ pub fn parse_cloud(
         PointFormat::KittiBin => parse_kitti(bytes, source, opts),
         PointFormat::NuscenesBin => parse_nuscenes(bytes, source, opts),
         PointFormat::Csv => parse_csv(bytes, source, opts),
+        #[cfg(feature = "parquet")]
         PointFormat::Parquet => parse_parquet(bytes, source, opts),
         other => Err(IoError::Format {
             path: source.to_path_buf(),
@@ -199,6 +206,7 @@ pub fn encode_cloud(
         PointFormat::KittiBin => Ok(bin_records::encode_kitti(cloud)),
         PointFormat::NuscenesBin => Ok(bin_records::encode_nuscenes(cloud)),
         PointFormat::Csv => text::encode_csv(cloud, path),
+        #[cfg(feature = "parquet")]
         PointFormat::Parquet => table::encode_parquet(cloud, path),
         other => Err(IoError::Format {
             path: path.to_path_buf(),

@@ -86,6 +86,7 @@ fn empty_csv_is_an_empty_file_error() {
     assert!(matches!(e, IoError::Empty { .. }));
 }
 
+#[cfg(feature = "parquet")]
 #[test]
 fn empty_parquet_is_an_empty_file_error() {
     let (e, _) = read_err("a.parquet", b"");
@@ -617,12 +618,14 @@ fn csv_negative_laser_id_is_refused() {
 
 // ---------------------------------------------------------------- Parquet
 
+#[cfg(feature = "parquet")]
 #[test]
 fn parquet_that_is_not_parquet_is_refused() {
     let (e, _) = read_err("a.parquet", b"this is not a parquet file at all");
     assert!(matches!(e, IoError::Parquet { .. }));
 }
 
+#[cfg(feature = "parquet")]
 #[test]
 fn parquet_without_z_column_is_a_missing_field_error() {
     use polars::prelude::*;
@@ -633,6 +636,7 @@ fn parquet_without_z_column_is_a_missing_field_error() {
     assert!(matches!(e, IoError::MissingField { field: "z", .. }));
 }
 
+#[cfg(feature = "parquet")]
 #[test]
 fn parquet_string_column_is_a_type_error() {
     use polars::prelude::*;
@@ -644,6 +648,7 @@ fn parquet_string_column_is_a_type_error() {
     assert_has(&msg, &["column x"]);
 }
 
+#[cfg(feature = "parquet")]
 #[test]
 fn parquet_null_value_names_the_row() {
     use polars::prelude::*;
@@ -668,6 +673,7 @@ fn parquet_null_value_names_the_row() {
     assert_has(&msg, &["point 1", "null"]);
 }
 
+#[cfg(feature = "parquet")]
 #[test]
 fn parquet_non_finite_value_names_the_row() {
     use polars::prelude::*;
