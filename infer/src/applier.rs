@@ -1,0 +1,434 @@
+//! The checked model: one weather at one MOR, ready to apply to scans.
+//!
+//! Order of the steps on a scan (each optional one off by default):
+//!
+//! 1. **Vanishing** (always): a return disappears when its range exceeds
+//!    `slope(band) × MOR × range_scale`, the band taken from the return's
+//!    calibrated reflectivity (hard threshold), or with the survival
+//!    probability of the table's fitted edge (`soft_edge`).
+//! 2. **Range noise** (`range_noise_m`): N(0, σ²) added to the range of each
+//!    kept return (seed 004 §4.2 step 2).
+//! 3. **Intensity attenuation** (`attenuate_intensity`): calibrated
+//!    reflectivity × `exp(−2·α·r)` with `α = ln(20)/MOR`.
+//! 4. **Near-range returns** (`near_range`): ghost and ring returns, each
+//!    replacing the return of its ray when closer (seed 004 §4.2 step 3;
+//!    see [`crate::near`]'s rules in the crate docs).
+//!
+//! Kept returns are otherwise untouched: the seed's "no change" class keeps
+//! its range and reflectivity, and the output keeps the input's order,
+//! intensity scale and time column.
+
+use murk_types::{LidarSpec, NoiseLaw, PointCloud, SurvivalFit, WeatherClass};
+use serde::Serialize;
+
+use crate::error::InferError;
+use crate::hyperparams::SlopeSource;
+use crate::kernel::{self, Hard};
+use crate::near::{NearSettings, add_near_range};
+use crate::sampling::{ScanSeed, TruncNormal};
+use crate::summary::ApplySummary;
+
+/// One reflectivity band of the applied model.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[non_exhaustive]
+pub struct BandRule {
+    /// Lower edge (inclusive), calibrated reflectivity.
+    pub reflectivity_min: f64,
+    /// Upper edge (exclusive); `None` when unbounded.
+    pub reflectivity_max: Option<f64>,
+    /// Vanishing slope of the band (NaN only for an identity model built on
+    /// a band without slope).
+    pub slope: f64,
+    /// `slope × MOR × range_scale`, metres (infinite for the identity).
+    pub vanishing_distance_m: f64,
+    /// Relative soft-edge width, when the table has it.
+    pub edge_width: Option<f64>,
+}
+
+/// The CDF of the survival edge.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub(crate) enum EdgeLaw {
+    Probit,
+    Logistic,
+}
+
+/// The fitted survival edge.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub(crate) struct SoftEdge {
+    pub edge: EdgeLaw,
+    pub dropout: f64,
+    pub residual: f64,
+    /// `1 / (1 − dropout_clear)`: the input is a clear recording that
+    /// already lost its clear-weather dropout, so survival is conditioned on
+    /// being present in it.
+    pub clear_factor: f64,
+}
+
+impl SoftEdge {
+    pub(crate) fn new(s: &SurvivalFit) -> Result<SoftEdge, String> {
+        let edge = match s.edge.as_str() {
+            "probit" => EdgeLaw::Probit,
+            "logistic" => EdgeLaw::Logistic,
+            other => return Err(format!("edge {other:?} is not probit or logistic")),
+        };
+        if s.dropout + s.residual > 1.0 {
+            return Err(format!(
+                "dropout {} + residual {} exceed 1",
+                s.dropout, s.residual
+            ));
+        }
+        let clear = s.dropout_clear.unwrap_or(0.0);
+        if !(0.0..1.0).contains(&clear) {
+            return Err(format!("dropout_clear {clear} is not in [0, 1)"));
+        }
+        Ok(SoftEdge {
+            edge,
+            dropout: s.dropout,
+            residual: s.residual,
+            clear_factor: 1.0 / (1.0 - clear),
+        })
+    }
+
+    /// `P(kept)` given the edge CDF value `f` at the point's range.
+    #[inline]
+    pub(crate) fn keep_probability(&self, f: f64) -> f64 {
+        let p = self.residual + (1.0 - self.dropout - self.residual) * (1.0 - f);
+        (p * self.clear_factor).min(1.0)
+    }
+}
+
+/// Largest expected near-range count per scan accepted.
+const MAX_EXPECTED_NEAR: f64 = 1e8;
+
+/// A ghost or ring law evaluated at the applied MOR.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct NearLaw {
+    pub expected: f64,
+    pub count_source: &'static str,
+    pub distance: TruncNormal,
+    pub reflectivity: TruncNormal,
+}
+
+impl NearLaw {
+    pub(crate) fn new(l: &NoiseLaw, mor: f64, count_scale: f64) -> Result<NearLaw, String> {
+        let (base, count_source) = match &l.count_law {
+            Some(c) => (c.expected(mor), "count_law"),
+            None => (l.points_per_scan, "points_per_scan"),
+        };
+        let expected = base * count_scale;
+        if !(expected.is_finite() && (0.0..=MAX_EXPECTED_NEAR).contains(&expected)) {
+            return Err(format!(
+                "expected count {expected} per scan at MOR {mor} m (from {count_source}) is not in [0, {MAX_EXPECTED_NEAR}]"
+            ));
+        }
+        let dlo = l.distance_m.lower.unwrap_or(0.0).max(0.0);
+        let dhi = l.distance_m.upper.unwrap_or(f64::INFINITY);
+        // Calibrated reflectivity lives in [0, 255].
+        let rlo = l.reflectivity.lower.unwrap_or(0.0).max(0.0);
+        let rhi = l.reflectivity.upper.unwrap_or(255.0).min(255.0);
+        if dlo >= dhi {
+            return Err(format!(
+                "distance_m truncation [{dlo}, {dhi}] m is empty (ranges are > 0)"
+            ));
+        }
+        if rlo >= rhi {
+            return Err(format!(
+                "reflectivity truncation [{rlo}, {rhi}] is empty (calibrated reflectivity lies in [0, 255])"
+            ));
+        }
+        Ok(NearLaw {
+            expected,
+            count_source,
+            distance: TruncNormal::new(l.distance_m.mean, l.distance_m.std, dlo, dhi),
+            reflectivity: TruncNormal::new(l.reflectivity.mean, l.reflectivity.std, rlo, rhi),
+        })
+    }
+}
+
+/// How a rain rate became the applied MOR.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub(crate) struct RainUse {
+    pub requested_mm_h: f64,
+    pub used_mm_h: f64,
+    pub warning: Option<String>,
+}
+
+/// A weather model checked against a coefficient table: applies one
+/// weather at one MOR to any number of scans.
+///
+/// Built by [`crate::ApplyParams::build`]; plain data, cheap to share
+/// between threads.
+#[derive(Debug, Clone)]
+pub struct Applier {
+    pub(crate) weather: WeatherClass,
+    pub(crate) mor_m: f64,
+    pub(crate) rain: Option<RainUse>,
+    pub(crate) identity: bool,
+    pub(crate) clear_mor_threshold_m: f64,
+    pub(crate) range_scale: f64,
+    pub(crate) slope_source: SlopeSource,
+    pub(crate) bands: Vec<BandRule>,
+    pub(crate) soft: Option<SoftEdge>,
+    pub(crate) near_range: bool,
+    pub(crate) ghost: Option<NearLaw>,
+    pub(crate) ring: Option<NearLaw>,
+    pub(crate) range_noise_m: f64,
+    pub(crate) attenuation_alpha: Option<f64>,
+    pub(crate) lidar: Option<LidarSpec>,
+    pub(crate) azimuth_resolution_deg: f64,
+    pub(crate) seed: u64,
+    pub(crate) warnings: Vec<String>,
+}
+
+/// A serialisable description of an [`Applier`]: what was applied.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[non_exhaustive]
+pub struct ModelSummary {
+    /// The weather.
+    pub weather: WeatherClass,
+    /// The applied MOR, metres (null for a rain rate of 0).
+    pub mor_m: Option<f64>,
+    /// The rain rate asked for, mm/h (rain given as a rate only).
+    pub rain_rate_requested_mm_h: Option<f64>,
+    /// The rain rate converted (differs from the request after a clamp).
+    pub rain_rate_used_mm_h: Option<f64>,
+    /// True when applying is the identity.
+    pub identity: bool,
+    /// The clear-weather MOR threshold, metres.
+    pub clear_mor_threshold_m: f64,
+    /// Range-scale coefficient of the target sensor.
+    pub range_scale: f64,
+    /// `vanishing_slope` or `vanishing_slope_q99`.
+    pub slope_field: &'static str,
+    /// `hard`, `soft-probit` or `soft-logistic`.
+    pub vanishing: &'static str,
+    /// Near-range returns on.
+    pub near_range: bool,
+    /// σ of the range noise, metres (null when off).
+    pub range_noise_m: Option<f64>,
+    /// α of the intensity attenuation, 1/m (null when off).
+    pub attenuation_alpha_per_m: Option<f64>,
+    /// Master seed.
+    pub seed: u64,
+    /// The bands applied.
+    pub bands: Vec<BandSummaryRule>,
+    /// Warnings raised while checking the parameters.
+    pub warnings: Vec<String>,
+}
+
+/// One band of a [`ModelSummary`] (finite numbers or null, for JSON).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[non_exhaustive]
+pub struct BandSummaryRule {
+    /// Lower edge (inclusive).
+    pub reflectivity_min: f64,
+    /// Upper edge (exclusive); null when unbounded.
+    pub reflectivity_max: Option<f64>,
+    /// Slope (null when the table has none and the model is the identity).
+    pub slope: Option<f64>,
+    /// Vanishing distance, metres (null for the identity).
+    pub vanishing_distance_m: Option<f64>,
+}
+
+fn finite(x: f64) -> Option<f64> {
+    x.is_finite().then_some(x)
+}
+
+impl Applier {
+    /// The weather applied.
+    pub fn weather(&self) -> WeatherClass {
+        self.weather
+    }
+
+    /// The applied MOR in metres (infinite for a rain rate of 0).
+    pub fn mor_m(&self) -> f64 {
+        self.mor_m
+    }
+
+    /// True when applying leaves every scan unchanged.
+    pub fn is_identity(&self) -> bool {
+        self.identity
+    }
+
+    /// The range-scale coefficient used.
+    pub fn range_scale(&self) -> f64 {
+        self.range_scale
+    }
+
+    /// The reflectivity bands with their vanishing distances.
+    pub fn bands(&self) -> &[BandRule] {
+        &self.bands
+    }
+
+    /// Warnings raised while checking the parameters (a clamp, an
+    /// extrapolated MOR, a missing near-range law).
+    pub fn warnings(&self) -> &[String] {
+        &self.warnings
+    }
+
+    /// The vanishing distance (metres) of a return of calibrated
+    /// reflectivity `reflectivity` (clamped into the lowest / highest band).
+    pub fn vanishing_distance_m(&self, reflectivity: f64) -> f64 {
+        let mut d = self.bands[0].vanishing_distance_m;
+        for b in &self.bands[1..] {
+            if reflectivity >= b.reflectivity_min {
+                d = b.vanishing_distance_m;
+            }
+        }
+        d
+    }
+
+    /// What is applied, for reports.
+    pub fn describe(&self) -> ModelSummary {
+        ModelSummary {
+            weather: self.weather,
+            mor_m: finite(self.mor_m),
+            rain_rate_requested_mm_h: self.rain.as_ref().map(|r| r.requested_mm_h),
+            rain_rate_used_mm_h: self.rain.as_ref().map(|r| r.used_mm_h),
+            identity: self.identity,
+            clear_mor_threshold_m: self.clear_mor_threshold_m,
+            range_scale: self.range_scale,
+            slope_field: self.slope_source.field(),
+            vanishing: match self.soft.map(|s| s.edge) {
+                None => "hard",
+                Some(EdgeLaw::Probit) => "soft-probit",
+                Some(EdgeLaw::Logistic) => "soft-logistic",
+            },
+            near_range: self.near_range,
+            range_noise_m: (self.range_noise_m > 0.0).then_some(self.range_noise_m),
+            attenuation_alpha_per_m: self.attenuation_alpha,
+            seed: self.seed,
+            bands: self
+                .bands
+                .iter()
+                .map(|b| BandSummaryRule {
+                    reflectivity_min: b.reflectivity_min,
+                    reflectivity_max: b.reflectivity_max,
+                    slope: finite(b.slope),
+                    vanishing_distance_m: finite(b.vanishing_distance_m),
+                })
+                .collect(),
+            warnings: self.warnings.clone(),
+        }
+    }
+
+    fn check_cloud(cloud: &PointCloud, key: &str) -> Result<(), InferError> {
+        cloud.check().map_err(|e| InferError::BadCloud {
+            scan: key.to_string(),
+            reason: e.to_string(),
+        })
+    }
+
+    /// The vanishing mask of `cloud` (1 = kept) into `mask`; returns the
+    /// number of kept points. With `soft_edge` the draws are seeded by
+    /// (seed, `key`), as in [`Applier::apply`].
+    pub fn mask(
+        &self,
+        cloud: &PointCloud,
+        key: &str,
+        mask: &mut Vec<u8>,
+    ) -> Result<u64, InferError> {
+        Self::check_cloud(cloud, key)?;
+        if self.identity {
+            mask.clear();
+            mask.resize(cloud.len(), 1);
+            return Ok(cloud.len() as u64);
+        }
+        Ok(kernel::total(&self.vanish(cloud, key, mask)).kept)
+    }
+
+    fn vanish(&self, cloud: &PointCloud, key: &str, mask: &mut Vec<u8>) -> Vec<kernel::Counts> {
+        match &self.soft {
+            None => kernel::hard_mask(&Hard::new(&self.bands, cloud.intensity_scale), cloud, mask),
+            Some(s) => kernel::soft_mask(
+                &self.bands,
+                s,
+                self.mor_m * self.range_scale,
+                cloud,
+                ScanSeed::new(self.seed, key),
+                mask,
+            ),
+        }
+    }
+
+    /// Applies the model to one scan.
+    ///
+    /// `key` names the scan: it seeds every random draw (with the master
+    /// seed) and labels errors and the summary. Use a name that is stable
+    /// across runs, such as the file's path relative to the batch input, so
+    /// that a scan gets the same output whatever else is in the batch.
+    pub fn apply(
+        &self,
+        cloud: &PointCloud,
+        key: &str,
+    ) -> Result<(PointCloud, ApplySummary), InferError> {
+        Self::check_cloud(cloud, key)?;
+        let mut summary = ApplySummary::empty(key, &self.bands);
+        summary.points_in = cloud.len() as u64;
+        if self.identity {
+            summary.identity = true;
+            summary.points_out = cloud.len() as u64;
+            // Every point in its band, none vanished.
+            let mut mask = Vec::new();
+            let counts = kernel::total(&kernel::hard_mask(
+                &Hard::new(&self.bands, cloud.intensity_scale),
+                cloud,
+                &mut mask,
+            ));
+            for (b, (n, _)) in summary
+                .bands
+                .iter_mut()
+                .zip(counts.per_band(self.bands.len()))
+            {
+                b.points_in = n;
+            }
+            summary.below_bands = counts.below();
+            summary.above_bands = counts.above;
+            return Ok((cloud.clone(), summary));
+        }
+        let seed = ScanSeed::new(self.seed, key);
+        let mut mask = Vec::new();
+        let chunks = self.vanish(cloud, key, &mut mask);
+        let counts = kernel::total(&chunks);
+        let mut out = kernel::compact(cloud, &mask, &chunks);
+        drop(mask);
+        summary.vanished = counts.n - counts.kept;
+        for (b, (n, kept)) in summary
+            .bands
+            .iter_mut()
+            .zip(counts.per_band(self.bands.len()))
+        {
+            b.points_in = n;
+            b.vanished = n - kept;
+        }
+        summary.below_bands = counts.below();
+        summary.above_bands = counts.above;
+
+        let sigma = (self.range_noise_m > 0.0).then_some(self.range_noise_m);
+        if sigma.is_some() || self.attenuation_alpha.is_some() {
+            kernel::perturb(&mut out, sigma, self.attenuation_alpha, seed);
+            if sigma.is_some() {
+                summary.range_noise_points = out.len() as u64;
+            }
+            if self.attenuation_alpha.is_some() {
+                summary.attenuated_points = out.len() as u64;
+            }
+        }
+
+        if self.near_range {
+            let settings = NearSettings {
+                ghost: self.ghost.as_ref(),
+                ring: self.ring.as_ref(),
+                lidar: self.lidar.as_ref(),
+                azimuth_resolution_deg: self.azimuth_resolution_deg,
+            };
+            let (g, r) =
+                add_near_range(cloud, &mut out, &settings, seed, key, &mut summary.warnings)?;
+            summary.ghost = g;
+            summary.ring = r;
+        }
+        summary.points_out = out.len() as u64;
+        Ok((out, summary))
+    }
+}

@@ -1,0 +1,422 @@
+//! Batch application over files and folders: plan (which input goes to
+//! which output), then run (read, apply, write, in parallel).
+//!
+//! - Inputs are files or folders. A folder is walked recursively in name
+//!   order; files in it whose extension is not a point-cloud format, and
+//!   hidden files, are listed in [`Plan::skipped`] with the reason (never
+//!   dropped silently). A file named explicitly must be a point cloud.
+//! - Outputs keep the relative path (a file argument: its name; a file found
+//!   in a folder: its path below the folder) under the output folder, with
+//!   the extension of the output format. Two inputs that map to the same
+//!   output, or an output that would overwrite an input, are errors.
+//! - The scan key that seeds the random draws is that relative path, so a
+//!   scan's output does not depend on where the batch lives or what else is
+//!   in it.
+//! - Same format in and out: intensities are written in the input's scale,
+//!   untouched points bit for bit. Another format: intensities are converted
+//!   to the output format's default scale, so that reading the output with
+//!   default options gives the same reflectivities.
+
+use std::collections::{HashMap, HashSet};
+use std::path::{Path, PathBuf};
+
+use murk_io::{PcdData, ReadOptions, WriteOptions};
+use murk_types::PointFormat;
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::applier::{Applier, ModelSummary};
+use crate::error::InferError;
+use crate::summary::{ApplySummary, SUMMARY_FORMAT};
+
+/// One input file and where its output goes.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+#[non_exhaustive]
+pub struct Job {
+    /// The input file.
+    pub input: PathBuf,
+    /// The output file.
+    pub output: PathBuf,
+    /// Relative path with `/` separators: the output's name below the output
+    /// folder and the seed key of the scan.
+    pub key: String,
+    /// Format the input is read as.
+    #[serde(skip)]
+    pub format_in: PointFormat,
+    /// Format written.
+    #[serde(skip)]
+    pub format_out: PointFormat,
+}
+
+/// A file found in an input folder and left out.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+#[non_exhaustive]
+pub struct Skipped {
+    /// The file.
+    pub path: PathBuf,
+    /// Why it was left out.
+    pub reason: String,
+}
+
+/// Inputs matched with outputs, checked before anything is written.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+#[non_exhaustive]
+pub struct Plan {
+    /// The files to process, in argument order (folders in name order).
+    pub jobs: Vec<Job>,
+    /// Files of input folders that are not point clouds.
+    pub skipped: Vec<Skipped>,
+}
+
+/// How to read and write the files of a batch.
+#[derive(Debug, Clone, Default)]
+pub struct BatchOptions {
+    /// Reader settings (forced format, ring elevations, intensity scale).
+    pub read: ReadOptions,
+    /// Output format; `None` keeps each input's format.
+    pub format: Option<PointFormat>,
+    /// PCD `DATA` encoding of PCD outputs.
+    pub pcd_data: PcdData,
+}
+
+/// One processed file.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[non_exhaustive]
+pub struct FileReport {
+    /// The input file.
+    pub input: PathBuf,
+    /// The file written.
+    pub output: PathBuf,
+    /// What applying did.
+    pub summary: ApplySummary,
+}
+
+/// The report of a batch (`murk-apply-summary/1`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[non_exhaustive]
+pub struct BatchReport {
+    /// Always [`SUMMARY_FORMAT`].
+    pub format: &'static str,
+    /// What was applied.
+    pub model: ModelSummary,
+    /// Counts summed over every file.
+    pub totals: ApplySummary,
+    /// Per file, in plan order.
+    pub files: Vec<FileReport>,
+    /// Files of input folders that were left out.
+    pub skipped: Vec<Skipped>,
+}
+
+impl BatchReport {
+    /// The report as pretty JSON (deterministic), newline-terminated.
+    pub fn to_json(&self) -> String {
+        let mut s = serde_json::to_string_pretty(self)
+            .unwrap_or_else(|e| format!("{{\"error\": \"{e}\"}}"));
+        s.push('\n');
+        s
+    }
+
+    /// Writes the JSON report atomically (temporary file, then rename).
+    pub fn write(&self, path: &Path) -> Result<(), InferError> {
+        write_atomic(path, self.to_json().as_bytes())
+    }
+}
+
+/// Writes `bytes` to `path` through a temporary file in the same folder.
+pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), InferError> {
+    let fs = |action: &'static str, p: &Path| {
+        let p = p.to_path_buf();
+        move |source| InferError::Fs {
+            path: p,
+            action,
+            source,
+        }
+    };
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let tmp = dir.join(format!(".{name}.{}.tmp", std::process::id()));
+    std::fs::write(&tmp, bytes).map_err(fs("write temporary file", &tmp))?;
+    std::fs::rename(&tmp, path).map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        fs("rename temporary file", path)(e)
+    })
+}
+
+/// `name` without the extension of `format` (`a.pcd.bin` → `a`).
+fn stem_of(name: &str, format: PointFormat) -> String {
+    let ext = format!(".{}", format.extension());
+    if name.len() > ext.len() && name.to_ascii_lowercase().ends_with(&ext) {
+        name[..name.len() - ext.len()].to_string()
+    } else {
+        Path::new(name)
+            .file_stem()
+            .map_or_else(|| name.to_string(), |s| s.to_string_lossy().into_owned())
+    }
+}
+
+fn canonical(p: &Path) -> Result<PathBuf, InferError> {
+    p.canonicalize().map_err(|source| InferError::Fs {
+        path: p.to_path_buf(),
+        action: "resolve path",
+        source,
+    })
+}
+
+/// Walks `dir` recursively in name order, appending `(file, relative key)`.
+fn walk(
+    dir: &Path,
+    prefix: &str,
+    exclude: &Path,
+    files: &mut Vec<(PathBuf, String)>,
+    skipped: &mut Vec<Skipped>,
+) -> Result<(), InferError> {
+    let rd = std::fs::read_dir(dir).map_err(|source| InferError::Fs {
+        path: dir.to_path_buf(),
+        action: "list folder",
+        source,
+    })?;
+    let mut entries = Vec::new();
+    for e in rd {
+        let e = e.map_err(|source| InferError::Fs {
+            path: dir.to_path_buf(),
+            action: "list folder",
+            source,
+        })?;
+        entries.push(e.path());
+    }
+    entries.sort();
+    for p in entries {
+        let name = p
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let key = if prefix.is_empty() {
+            name.clone()
+        } else {
+            format!("{prefix}/{name}")
+        };
+        if name.starts_with('.') {
+            skipped.push(Skipped {
+                path: p,
+                reason: "hidden file or folder".into(),
+            });
+            continue;
+        }
+        if p.is_dir() {
+            if canonical(&p)? == exclude {
+                skipped.push(Skipped {
+                    path: p,
+                    reason: "the output folder".into(),
+                });
+                continue;
+            }
+            walk(&p, &key, exclude, files, skipped)?;
+        } else {
+            files.push((p, key));
+        }
+    }
+    Ok(())
+}
+
+/// Matches every input with its output under `out_dir` (created if needed)
+/// and checks that nothing would be overwritten or written twice.
+pub fn plan(inputs: &[PathBuf], out_dir: &Path, opts: &BatchOptions) -> Result<Plan, InferError> {
+    std::fs::create_dir_all(out_dir).map_err(|source| InferError::Fs {
+        path: out_dir.to_path_buf(),
+        action: "create output folder",
+        source,
+    })?;
+    let out_canon = canonical(out_dir)?;
+    let mut found: Vec<(PathBuf, String, bool)> = Vec::new();
+    let mut skipped = Vec::new();
+    for inp in inputs {
+        let meta = std::fs::metadata(inp).map_err(|source| InferError::Fs {
+            path: inp.clone(),
+            action: "open input",
+            source,
+        })?;
+        if meta.is_dir() {
+            if canonical(inp)? == out_canon {
+                return Err(InferError::Input {
+                    path: inp.clone(),
+                    reason:
+                        "is the output folder: outputs would overwrite inputs; choose another --out"
+                            .into(),
+                });
+            }
+            let mut files = Vec::new();
+            walk(inp, "", &out_canon, &mut files, &mut skipped)?;
+            found.extend(files.into_iter().map(|(p, k)| (p, k, false)));
+        } else {
+            let name = inp
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .ok_or_else(|| InferError::Input {
+                    path: inp.clone(),
+                    reason: "has no file name".into(),
+                })?;
+            found.push((inp.clone(), name, true));
+        }
+    }
+
+    let mut jobs = Vec::with_capacity(found.len());
+    let mut kept_skipped = skipped;
+    for (path, key, explicit) in found {
+        let format_in = match opts.read.format_of(&path) {
+            Ok(f) => f,
+            Err(e) if !explicit => {
+                kept_skipped.push(Skipped {
+                    path,
+                    reason: format!("not a point-cloud file ({e})"),
+                });
+                continue;
+            }
+            Err(e) => return Err(e.into()),
+        };
+        let format_out = opts.format.unwrap_or(format_in);
+        if !format_out.writable() {
+            return Err(InferError::Input {
+                path,
+                reason: format!(
+                    "{format_out:?} files cannot be written: choose an output format (pcd, bin, nuscenes, csv, parquet)"
+                ),
+            });
+        }
+        let key = if format_out == format_in && opts.format.is_none() {
+            key
+        } else {
+            let (dir, name) = match key.rsplit_once('/') {
+                Some((d, n)) => (format!("{d}/"), n.to_string()),
+                None => (String::new(), key.clone()),
+            };
+            format!(
+                "{dir}{}.{}",
+                stem_of(&name, format_in),
+                format_out.extension()
+            )
+        };
+        let output = key.split('/').fold(out_canon.clone(), |p, c| p.join(c));
+        jobs.push(Job {
+            input: path,
+            output,
+            key,
+            format_in,
+            format_out,
+        });
+    }
+
+    // Nothing written twice, no input overwritten.
+    let mut seen: HashMap<&str, &Path> = HashMap::new();
+    for j in &jobs {
+        if let Some(other) = seen.insert(&j.key, &j.input) {
+            return Err(InferError::Input {
+                path: j.input.clone(),
+                reason: format!(
+                    "would be written to {} like {}: give the two inputs different names or apply them separately",
+                    j.output.display(),
+                    other.display()
+                ),
+            });
+        }
+    }
+    let canon_inputs: HashMap<PathBuf, &Path> = jobs
+        .iter()
+        .map(|j| Ok((canonical(&j.input)?, j.input.as_path())))
+        .collect::<Result<_, InferError>>()?;
+    for j in &jobs {
+        if j.output.exists()
+            && let Some(inp) = canon_inputs.get(&canonical(&j.output)?)
+        {
+            return Err(InferError::OutputIsInput {
+                output: j.output.clone(),
+                input: inp.to_path_buf(),
+            });
+        }
+    }
+    let dirs: HashSet<&Path> = jobs.iter().filter_map(|j| j.output.parent()).collect();
+    for d in dirs {
+        std::fs::create_dir_all(d).map_err(|source| InferError::Fs {
+            path: d.to_path_buf(),
+            action: "create output folder",
+            source,
+        })?;
+    }
+    Ok(Plan {
+        jobs,
+        skipped: kept_skipped,
+    })
+}
+
+/// Runs one job: read, apply, write.
+pub fn run_job(
+    applier: &Applier,
+    job: &Job,
+    opts: &BatchOptions,
+) -> Result<FileReport, InferError> {
+    let mut read = opts.read.clone();
+    read.format = Some(job.format_in);
+    let cloud = murk_io::read_cloud(&job.input, &read)?;
+    let (mut out, summary) = applier.apply(&cloud, &job.key)?;
+    drop(cloud);
+    if job.format_out != job.format_in {
+        out.to_scale(job.format_out.default_intensity_scale());
+    }
+    let w = WriteOptions {
+        format: job.format_out,
+        pcd_data: opts.pcd_data,
+    };
+    murk_io::write_cloud_with(&job.output, &out, &w)?;
+    Ok(FileReport {
+        input: job.input.clone(),
+        output: job.output.clone(),
+        summary,
+    })
+}
+
+/// Runs every job of `plan` in parallel; `progress` is called once per
+/// finished file (from worker threads). On failure the error of the first
+/// failing file in plan order is returned (files that succeeded are
+/// written).
+pub fn run(
+    applier: &Applier,
+    plan: &Plan,
+    opts: &BatchOptions,
+    progress: &(dyn Fn(&FileReport) + Sync),
+) -> Result<BatchReport, InferError> {
+    let results: Vec<Result<FileReport, InferError>> = plan
+        .jobs
+        .par_iter()
+        .map(|j| {
+            let r = run_job(applier, j, opts);
+            if let Ok(f) = &r {
+                progress(f);
+            }
+            r
+        })
+        .collect();
+    let mut files = Vec::with_capacity(results.len());
+    for r in results {
+        files.push(r?);
+    }
+    let mut totals = ApplySummary::empty("total", applier.bands());
+    totals.identity = applier.is_identity();
+    for f in &files {
+        totals.add(&f.summary);
+    }
+    totals
+        .warnings
+        .splice(0..0, applier.warnings().iter().cloned());
+    Ok(BatchReport {
+        format: SUMMARY_FORMAT,
+        model: applier.describe(),
+        totals,
+        files,
+        skipped: plan.skipped.clone(),
+    })
+}

@@ -1,0 +1,131 @@
+//! The error type of murk-infer.
+//!
+//! Every variant says *where* (the table and field, the scan and point index,
+//! or the file) and *why*, so that a message alone is enough to fix the input.
+
+use std::path::PathBuf;
+
+/// Errors raised while checking parameters, applying a model or running a
+/// batch.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum InferError {
+    /// The coefficient table file could not be read or failed validation.
+    #[error(transparent)]
+    Table(#[from] murk_types::TypesError),
+
+    /// The requested weather is not in the table.
+    #[error("{table}: weathers.{weather}: not in the table ({reason}); the table has: {available}")]
+    WeatherAbsent {
+        /// Which table (its file, or its campaign when built in memory).
+        table: String,
+        /// The weather asked for.
+        weather: String,
+        /// Why the table lacks it (its `absent` entry), or `not fitted`.
+        reason: String,
+        /// The weathers the table does have, comma separated.
+        available: String,
+    },
+
+    /// A coefficient the chosen options need is null or missing in the table.
+    #[error("{table}: {field}: {reason}")]
+    MissingCoefficient {
+        /// Which table.
+        table: String,
+        /// JSON path of the field (`weathers.fog.vanishing_slope[0].slope`).
+        field: String,
+        /// Why it is needed and why it is absent.
+        reason: String,
+    },
+
+    /// A parameter value outside its range.
+    #[error("parameter {name} = {value}: {reason}")]
+    InvalidParam {
+        /// Parameter name as in the [`crate::ApplyParams`] table.
+        name: &'static str,
+        /// The value given.
+        value: String,
+        /// The allowed range.
+        reason: String,
+    },
+
+    /// A rain rate outside the validity range of the table's rate → MOR
+    /// conversion (and `clamp` not set).
+    #[error(
+        "{table}: weathers.rain.mor_from_rain_rate: rain rate {rate} mm/h is outside the conversion's validity [{min}, {max}] mm/h ({reason}); pass a rate inside it, give a MOR instead, or ask for a clamp"
+    )]
+    RainRateOutOfRange {
+        /// Which table.
+        table: String,
+        /// The rate asked for, mm/h.
+        rate: f64,
+        /// Lowest valid rate, mm/h.
+        min: f64,
+        /// Highest valid rate, mm/h (`inf` when unbounded).
+        max: String,
+        /// Where the range comes from.
+        reason: String,
+    },
+
+    /// Two settings that cannot be combined.
+    #[error("conflicting settings: {0}")]
+    Conflict(String),
+
+    /// A point cloud whose columns disagree.
+    #[error("scan {scan}: {reason}")]
+    BadCloud {
+        /// The scan's key (its relative path in a batch).
+        scan: String,
+        /// What is wrong.
+        reason: String,
+    },
+
+    /// A ring id that the given sensor description does not have.
+    #[error(
+        "scan {scan}: point {point}: ring {ring} is not a ring of the sensor description ({rings} rings): give the sensor's description or leave it out to take ring elevations from the scan"
+    )]
+    RingOutsideSpec {
+        /// The scan's key.
+        scan: String,
+        /// 0-based point index.
+        point: usize,
+        /// The ring id found.
+        ring: u16,
+        /// Number of rings in the description.
+        rings: usize,
+    },
+
+    /// Reading or writing a point-cloud file failed.
+    #[error(transparent)]
+    Io(#[from] murk_io::IoError),
+
+    /// A file-system operation on an input or output failed.
+    #[error("{path}: {action}: {source}")]
+    Fs {
+        /// The path.
+        path: PathBuf,
+        /// What was attempted.
+        action: &'static str,
+        /// The underlying error.
+        source: std::io::Error,
+    },
+
+    /// An input argument that cannot be used (unknown format, missing file,
+    /// two inputs mapping to the same output, …).
+    #[error("{path}: {reason}")]
+    Input {
+        /// The input path.
+        path: PathBuf,
+        /// Why it is refused.
+        reason: String,
+    },
+
+    /// An output would overwrite one of the inputs.
+    #[error("{output}: refusing to overwrite the input {input}; choose another --out")]
+    OutputIsInput {
+        /// The output path that was planned.
+        output: PathBuf,
+        /// The input it coincides with.
+        input: PathBuf,
+    },
+}

@@ -1,0 +1,598 @@
+//! Checked parameters of the applier.
+//!
+//! [`ApplyParams`] is what a user asks for; [`ApplyParams::build`] checks it
+//! against a [`CoefficientTable`] once, before any point is touched, and
+//! returns the [`Applier`] that does the work. Every refusal names the
+//! parameter or the table field and the allowed range.
+
+use murk_types::{CoefficientTable, LidarSpec, NoiseLaw, WeatherClass, WeatherCoefficients};
+
+use crate::applier::{Applier, BandRule, NearLaw, RainUse, SoftEdge};
+use crate::error::InferError;
+
+/// The MOR (metres) at and above which the weather is clear and applying is
+/// the identity, when neither the parameters nor the table say otherwise:
+/// the 2000 m of the PDD selection rules (seed report §3.3).
+pub const DEFAULT_CLEAR_MOR_M: f64 = 2000.0;
+
+/// Default azimuth grid (degrees) of near-range rays when no sensor
+/// description is given: the VLP-16's 0.2° at 600 rpm.
+pub const DEFAULT_AZIMUTH_RESOLUTION_DEG: f64 = 0.2;
+
+/// How strong the weather is.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Severity {
+    /// Meteorological optical range in metres (fog, rain, snow).
+    Mor(f64),
+    /// Rain rate in mm/h, turned into a MOR by the table's
+    /// `weathers.rain.mor_from_rain_rate` (rain only). A rate of 0 is no
+    /// rain: the identity.
+    RainRate(f64),
+}
+
+/// Which of the table's slope estimates decides vanishing.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum SlopeSource {
+    /// `vanishing_slope`: the maximum-likelihood edge of the survival
+    /// boundary, "as appliers use it" (the table's own recommendation).
+    #[default]
+    Survival,
+    /// `vanishing_slope_q99`: the seed's estimate (zero-intercept regression
+    /// of the per-MOR 0.99 quantile), to reproduce the seed's model exactly.
+    Quantile,
+}
+
+impl SlopeSource {
+    /// The table field this source reads.
+    pub fn field(self) -> &'static str {
+        match self {
+            SlopeSource::Survival => "vanishing_slope",
+            SlopeSource::Quantile => "vanishing_slope_q99",
+        }
+    }
+}
+
+/// What to apply, before it is checked against a table.
+///
+/// | Name | Default | Purpose | Range |
+/// |---|---|---|---|
+/// | `weather` | (required) | which of the table's weathers | a weather present in the table |
+/// | `severity` | (required) | MOR in m, or a rain rate in mm/h (rain only) | MOR > 0; rate inside the conversion's validity (see `clamp_rain_rate`) |
+/// | `range_scale` | the table's `lidar.range_scale` | target sensor's range coefficient: vanishing distance = slope × MOR × range_scale | > 0 |
+/// | `slope_source` | [`SlopeSource::Survival`] | which slope estimate decides vanishing | survival, quantile |
+/// | `soft_edge` | off | stochastic survival edge from the table's `survival` fit (edge width per band, dropout, residual) instead of a hard threshold | needs `survival` and every band's `edge_width` |
+/// | `near_range` | off | add ghost and ring returns from the table's laws; each replaces the return of its ray when closer | needs `ghost` or `ring` |
+/// | `near_range_count_scale` | 1 | multiplies the expected ghost/ring count per scan (the table counts per *recording*; a single revolution of a 1-minute recording is about 1/600 of it) | ≥ 0, finite |
+/// | `range_noise_m` | 0 (off) | σ of Gaussian noise added to the range of kept returns | ≥ 0, finite |
+/// | `attenuate_intensity` | off | multiply kept intensities by the two-way loss exp(−2·α·r), α = ln(20)/MOR (Koschmieder) | — |
+/// | `clamp_rain_rate` | off | clamp a rain rate outside the conversion's validity into it (with a warning) instead of failing | — |
+/// | `clear_mor_threshold_m` | the table's, else [`DEFAULT_CLEAR_MOR_M`] | MOR at and above which applying is the identity | > 0 |
+/// | `lidar` | none | sensor description for near-range rays (ring elevations, azimuth grid); none: ring elevations are measured on each scan | a valid [`LidarSpec`] |
+/// | `azimuth_resolution_deg` | `lidar`'s, else [`DEFAULT_AZIMUTH_RESOLUTION_DEG`] | azimuth grid of near-range rays | (0, 45] |
+/// | `seed` | 0 | master seed of every random draw | any |
+///
+/// ```
+/// use murk_infer::{ApplyParams, Severity};
+/// use murk_types::WeatherClass;
+///
+/// let p = ApplyParams::new(WeatherClass::Fog, Severity::Mor(60.0))
+///     .near_range(true)
+///     .range_noise_m(0.02)
+///     .seed(7);
+/// assert_eq!(p.weather(), WeatherClass::Fog);
+/// ```
+#[derive(Debug, Clone, PartialEq)]
+pub struct ApplyParams {
+    weather: WeatherClass,
+    severity: Severity,
+    range_scale: Option<f64>,
+    slope_source: SlopeSource,
+    soft_edge: bool,
+    near_range: bool,
+    near_range_count_scale: f64,
+    range_noise_m: f64,
+    attenuate_intensity: bool,
+    clamp_rain_rate: bool,
+    clear_mor_threshold_m: Option<f64>,
+    lidar: Option<LidarSpec>,
+    azimuth_resolution_deg: Option<f64>,
+    seed: u64,
+}
+
+impl ApplyParams {
+    /// Vanishing only, hard threshold, table defaults for everything else.
+    pub fn new(weather: WeatherClass, severity: Severity) -> Self {
+        ApplyParams {
+            weather,
+            severity,
+            range_scale: None,
+            slope_source: SlopeSource::default(),
+            soft_edge: false,
+            near_range: false,
+            near_range_count_scale: 1.0,
+            range_noise_m: 0.0,
+            attenuate_intensity: false,
+            clamp_rain_rate: false,
+            clear_mor_threshold_m: None,
+            lidar: None,
+            azimuth_resolution_deg: None,
+            seed: 0,
+        }
+    }
+
+    /// The weather asked for.
+    pub fn weather(&self) -> WeatherClass {
+        self.weather
+    }
+
+    /// The severity asked for.
+    pub fn severity(&self) -> Severity {
+        self.severity
+    }
+
+    /// Sets the target sensor's range-scale coefficient.
+    pub fn range_scale(mut self, k: f64) -> Self {
+        self.range_scale = Some(k);
+        self
+    }
+
+    /// Chooses the slope estimate.
+    pub fn slope_source(mut self, s: SlopeSource) -> Self {
+        self.slope_source = s;
+        self
+    }
+
+    /// Turns the stochastic survival edge on or off.
+    pub fn soft_edge(mut self, on: bool) -> Self {
+        self.soft_edge = on;
+        self
+    }
+
+    /// Turns ghost and ring returns on or off.
+    pub fn near_range(mut self, on: bool) -> Self {
+        self.near_range = on;
+        self
+    }
+
+    /// Scales the expected ghost/ring count per scan.
+    pub fn near_range_count_scale(mut self, s: f64) -> Self {
+        self.near_range_count_scale = s;
+        self
+    }
+
+    /// Sets the σ (metres) of Gaussian range noise; 0 turns it off.
+    pub fn range_noise_m(mut self, sigma: f64) -> Self {
+        self.range_noise_m = sigma;
+        self
+    }
+
+    /// Turns two-way intensity attenuation on or off.
+    pub fn attenuate_intensity(mut self, on: bool) -> Self {
+        self.attenuate_intensity = on;
+        self
+    }
+
+    /// Clamps an out-of-validity rain rate (with a warning) instead of failing.
+    pub fn clamp_rain_rate(mut self, on: bool) -> Self {
+        self.clamp_rain_rate = on;
+        self
+    }
+
+    /// Overrides the clear-weather MOR threshold.
+    pub fn clear_mor_threshold_m(mut self, m: f64) -> Self {
+        self.clear_mor_threshold_m = Some(m);
+        self
+    }
+
+    /// Sets the sensor description used for near-range rays.
+    pub fn lidar(mut self, spec: LidarSpec) -> Self {
+        self.lidar = Some(spec);
+        self
+    }
+
+    /// Sets the azimuth grid of near-range rays.
+    pub fn azimuth_resolution_deg(mut self, deg: f64) -> Self {
+        self.azimuth_resolution_deg = Some(deg);
+        self
+    }
+
+    /// Sets the master seed.
+    pub fn seed(mut self, seed: u64) -> Self {
+        self.seed = seed;
+        self
+    }
+
+    /// Checks the parameters against `table` and returns the applier.
+    ///
+    /// `table` errors are labelled with the table's campaign; use
+    /// [`ApplyParams::build_labelled`] to name its file instead.
+    pub fn build(&self, table: &CoefficientTable) -> Result<Applier, InferError> {
+        self.build_labelled(table, &format!("table of campaign {:?}", table.campaign))
+    }
+
+    /// Reads the table at `path` and checks the parameters against it.
+    pub fn build_from_file(&self, path: &std::path::Path) -> Result<Applier, InferError> {
+        let table = CoefficientTable::read(path)?;
+        self.build_labelled(&table, &path.display().to_string())
+    }
+
+    /// [`ApplyParams::build`], naming the table `label` in errors.
+    pub fn build_labelled(
+        &self,
+        table: &CoefficientTable,
+        label: &str,
+    ) -> Result<Applier, InferError> {
+        let invalid = |name: &'static str, value: f64, reason: &str| InferError::InvalidParam {
+            name,
+            value: value.to_string(),
+            reason: reason.to_string(),
+        };
+        let missing = |field: String, reason: String| InferError::MissingCoefficient {
+            table: label.to_string(),
+            field,
+            reason,
+        };
+        let w = self.weather;
+        if w == WeatherClass::Clear {
+            return Err(InferError::Conflict(
+                "weather clear is the reference: applying it is the identity; choose fog, rain or snow".into(),
+            ));
+        }
+        let coeffs = table
+            .weathers
+            .get(&w)
+            .ok_or_else(|| InferError::WeatherAbsent {
+                table: label.to_string(),
+                weather: w.to_string(),
+                reason: table
+                    .absent
+                    .get(&w)
+                    .cloned()
+                    .unwrap_or_else(|| "not fitted".into()),
+                available: if table.weathers.is_empty() {
+                    "none".into()
+                } else {
+                    table
+                        .weathers
+                        .keys()
+                        .map(|k| k.name())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                },
+            })?;
+
+        // Scalar parameters.
+        let range_scale = self.range_scale.unwrap_or(table.lidar.range_scale);
+        if !(range_scale.is_finite() && range_scale > 0.0) {
+            return Err(invalid(
+                "range_scale",
+                range_scale,
+                "must be finite and > 0",
+            ));
+        }
+        if !(self.range_noise_m.is_finite() && self.range_noise_m >= 0.0) {
+            return Err(invalid(
+                "range_noise_m",
+                self.range_noise_m,
+                "σ must be finite and ≥ 0 (0 turns noise off)",
+            ));
+        }
+        if !(self.near_range_count_scale.is_finite() && self.near_range_count_scale >= 0.0) {
+            return Err(invalid(
+                "near_range_count_scale",
+                self.near_range_count_scale,
+                "must be finite and ≥ 0",
+            ));
+        }
+        let clear_mor = self
+            .clear_mor_threshold_m
+            .or(table_clear_threshold(table))
+            .unwrap_or(DEFAULT_CLEAR_MOR_M);
+        if !(clear_mor.is_finite() && clear_mor > 0.0) {
+            return Err(invalid(
+                "clear_mor_threshold_m",
+                clear_mor,
+                "must be finite and > 0",
+            ));
+        }
+        if let Some(spec) = &self.lidar {
+            spec.validate().map_err(|e| InferError::InvalidParam {
+                name: "lidar",
+                value: spec.model.clone(),
+                reason: e.to_string(),
+            })?;
+        }
+        let az_res = self
+            .azimuth_resolution_deg
+            .or(self.lidar.as_ref().map(|l| l.azimuth_resolution_deg))
+            .unwrap_or(DEFAULT_AZIMUTH_RESOLUTION_DEG);
+        if !(az_res.is_finite() && az_res > 0.0 && az_res <= 45.0) {
+            return Err(invalid(
+                "azimuth_resolution_deg",
+                az_res,
+                "must be in (0, 45] degrees",
+            ));
+        }
+        if self.soft_edge && self.slope_source == SlopeSource::Quantile {
+            return Err(InferError::Conflict(
+                "soft_edge uses the survival fit's edge widths, which belong to vanishing_slope: it cannot be combined with slope_source = quantile".into(),
+            ));
+        }
+
+        // Severity → effective MOR.
+        let mut warnings = Vec::new();
+        let (mor, rain) = match self.severity {
+            Severity::Mor(m) => {
+                if !(m.is_finite() && m > 0.0) {
+                    return Err(invalid("mor_m", m, "MOR must be finite and > 0 metres"));
+                }
+                (m, None)
+            }
+            Severity::RainRate(r) => {
+                if w != WeatherClass::Rain {
+                    return Err(InferError::Conflict(format!(
+                        "a rain rate only applies to weather rain, not {w}; give a MOR"
+                    )));
+                }
+                let (m, use_) = rain_to_mor(r, coeffs, self.clamp_rain_rate, label)?;
+                if let Some(wm) = &use_.warning {
+                    warnings.push(wm.clone());
+                }
+                (m, Some(use_))
+            }
+        };
+        let identity = mor >= clear_mor;
+
+        if !identity
+            && let (Some(lo), Some(hi)) = (coeffs.mor_min_m, coeffs.mor_max_m)
+            && (mor < lo || mor > hi)
+        {
+            warnings.push(format!(
+                "MOR {mor} m is outside the {lo}–{hi} m of the {w} recordings the table was fitted on: the linear vanishing model extrapolates"
+            ));
+        }
+
+        // Bands.
+        let source = match self.slope_source {
+            SlopeSource::Survival => &coeffs.vanishing_slope,
+            SlopeSource::Quantile => &coeffs.vanishing_slope_q99,
+        };
+        let field = format!("weathers.{w}.{}", self.slope_source.field());
+        if source.is_empty() {
+            return Err(missing(field, "has no band".into()));
+        }
+        if source.len() > crate::kernel::MAX_BANDS {
+            return Err(missing(
+                field,
+                format!(
+                    "has {} bands; murk-infer applies at most {}",
+                    source.len(),
+                    crate::kernel::MAX_BANDS
+                ),
+            ));
+        }
+        let mut bands = Vec::with_capacity(source.len());
+        for (i, b) in source.iter().enumerate() {
+            let slope = match b.slope {
+                Some(s) => s,
+                None if identity => f64::NAN,
+                None => {
+                    return Err(missing(
+                        format!("{field}[{i}].slope"),
+                        format!(
+                            "is null ({}): the band [{}, {}) cannot be applied",
+                            b.reason.as_deref().unwrap_or("no reason given"),
+                            b.reflectivity_min,
+                            b.reflectivity_max
+                                .map_or("∞".to_string(), |m| m.to_string())
+                        ),
+                    ));
+                }
+            };
+            if self.soft_edge
+                && !identity
+                && b.edge_width.is_none_or(|e| !(e.is_finite() && e > 0.0))
+            {
+                return Err(missing(
+                    format!("{field}[{i}].edge_width"),
+                    "soft_edge needs a finite edge width > 0 in every band".into(),
+                ));
+            }
+            bands.push(BandRule {
+                reflectivity_min: b.reflectivity_min,
+                reflectivity_max: b.reflectivity_max,
+                slope,
+                vanishing_distance_m: slope * mor * range_scale,
+                edge_width: b.edge_width,
+            });
+        }
+
+        let soft = if self.soft_edge && !identity {
+            let s = coeffs.survival.as_ref().ok_or_else(|| {
+                missing(
+                    format!("weathers.{w}.survival"),
+                    "soft_edge needs the survival fit, which this table lacks".into(),
+                )
+            })?;
+            Some(SoftEdge::new(s).map_err(|r| missing(format!("weathers.{w}.survival"), r))?)
+        } else {
+            None
+        };
+
+        let (ghost, ring) = if self.near_range && !identity {
+            let law = |l: &Option<NoiseLaw>, name: &str| -> Result<Option<NearLaw>, InferError> {
+                match l {
+                    Some(l) => NearLaw::new(l, mor, self.near_range_count_scale)
+                        .map(Some)
+                        .map_err(|r| missing(format!("weathers.{w}.{name}"), r)),
+                    None => Ok(None),
+                }
+            };
+            let ghost = law(&coeffs.ghost, "ghost")?;
+            let ring = law(&coeffs.ring, "ring")?;
+            if ghost.is_none() && ring.is_none() {
+                return Err(missing(
+                    format!("weathers.{w}.ghost, weathers.{w}.ring"),
+                    format!(
+                        "near_range needs at least one of the two laws; both are null (ghost: {}; ring: {})",
+                        coeffs.ghost_reason.as_deref().unwrap_or("no reason given"),
+                        coeffs.ring_reason.as_deref().unwrap_or("no reason given")
+                    ),
+                ));
+            }
+            for (l, name, reason) in [
+                (&ghost, "ghost", &coeffs.ghost_reason),
+                (&ring, "ring", &coeffs.ring_reason),
+            ] {
+                if l.is_none() {
+                    warnings.push(format!(
+                        "no {name} returns added: the table has no {name} law ({})",
+                        reason.as_deref().unwrap_or("no reason given")
+                    ));
+                }
+            }
+            (ghost, ring)
+        } else {
+            (None, None)
+        };
+
+        Ok(Applier {
+            weather: w,
+            mor_m: mor,
+            rain,
+            identity,
+            clear_mor_threshold_m: clear_mor,
+            range_scale,
+            slope_source: self.slope_source,
+            bands,
+            soft,
+            near_range: self.near_range && !identity,
+            ghost,
+            ring,
+            range_noise_m: if identity { 0.0 } else { self.range_noise_m },
+            attenuation_alpha: (self.attenuate_intensity && !identity).then(|| 20f64.ln() / mor),
+            lidar: self.lidar.clone(),
+            azimuth_resolution_deg: az_res,
+            seed: self.seed,
+            warnings,
+        })
+    }
+}
+
+/// The table's clear-weather MOR threshold, when it records one.
+fn table_clear_threshold(_table: &CoefficientTable) -> Option<f64> {
+    None
+}
+
+/// Converts a rain rate with the table's conversion, checking its validity.
+fn rain_to_mor(
+    rate: f64,
+    coeffs: &WeatherCoefficients,
+    clamp: bool,
+    label: &str,
+) -> Result<(f64, RainUse), InferError> {
+    if !(rate.is_finite() && rate >= 0.0) {
+        return Err(InferError::InvalidParam {
+            name: "rain_rate",
+            value: rate.to_string(),
+            reason: "must be finite and ≥ 0 mm/h".into(),
+        });
+    }
+    if rate == 0.0 {
+        // No rain: the identity, whatever the conversion says at R = 0.
+        return Ok((
+            f64::INFINITY,
+            RainUse {
+                requested_mm_h: 0.0,
+                used_mm_h: 0.0,
+                warning: None,
+            },
+        ));
+    }
+    let conv = coeffs.mor_from_rain_rate.as_ref().ok_or_else(|| {
+        InferError::MissingCoefficient {
+            table: label.to_string(),
+            field: "weathers.rain.mor_from_rain_rate".into(),
+            reason: format!(
+                "a rain rate needs the table's rate → MOR conversion, which is missing ({}); give a MOR instead",
+                coeffs
+                    .mor_from_rain_rate_reason
+                    .as_deref()
+                    .unwrap_or("no reason given")
+            ),
+        }
+    })?;
+    // Validity: the fitted rates when the table records them; otherwise
+    // [0, the rate where the line reaches MOR = 0).
+    let zero = conv.zero_mor_rain_rate.or_else(|| {
+        (conv.slope < 0.0 && conv.intercept > 0.0).then(|| -conv.intercept / conv.slope)
+    });
+    let lo = conv.rain_rate_min.unwrap_or(0.0);
+    let (hi, hi_exclusive, why) = match (conv.rain_rate_max, zero) {
+        (Some(h), Some(z)) if z <= h => (z, true, "the fitted rates, up to where MOR reaches 0"),
+        (Some(h), _) => (h, false, "the rain rates the conversion was fitted on"),
+        (None, Some(z)) => (
+            z,
+            true,
+            "up to the rate where the conversion reaches MOR = 0",
+        ),
+        (None, None) => (f64::INFINITY, false, "the conversion is unbounded"),
+    };
+    let why = if conv.rain_rate_min.is_some() || conv.rain_rate_max.is_some() {
+        why.to_string()
+    } else {
+        format!("{why}; the table records no fitted rate range")
+    };
+    let inside = rate >= lo && if hi_exclusive { rate < hi } else { rate <= hi };
+    let max_text = if hi.is_finite() {
+        format!("{hi}{}", if hi_exclusive { " (exclusive)" } else { "" })
+    } else {
+        "inf".into()
+    };
+    let mut used = rate;
+    let mut warning = None;
+    if !inside {
+        if !clamp {
+            return Err(InferError::RainRateOutOfRange {
+                table: label.to_string(),
+                rate,
+                min: lo,
+                max: max_text,
+                reason: why,
+            });
+        }
+        if rate > hi && hi_exclusive {
+            return Err(InferError::RainRateOutOfRange {
+                table: label.to_string(),
+                rate,
+                min: lo,
+                max: max_text,
+                reason: format!(
+                    "{why}; cannot clamp to a rate whose MOR is 0 (everything would vanish)"
+                ),
+            });
+        }
+        used = rate.clamp(lo, hi);
+        warning = Some(format!(
+            "rain rate {rate} mm/h clamped to {used} mm/h, the nearest rate inside the conversion's validity [{lo}, {max_text}] mm/h"
+        ));
+    }
+    let mor = conv.mor(used);
+    if !(mor.is_finite() && mor > 0.0) {
+        return Err(InferError::RainRateOutOfRange {
+            table: label.to_string(),
+            rate,
+            min: lo,
+            max: max_text,
+            reason: format!("the conversion gives MOR {mor} m at {used} mm/h, which is not > 0"),
+        });
+    }
+    Ok((
+        mor,
+        RainUse {
+            requested_mm_h: rate,
+            used_mm_h: used,
+            warning,
+        },
+    ))
+}

@@ -1,0 +1,409 @@
+//! Near-range returns: ghost points (3–10 m) and the ring / "fake wall"
+//! (< 3 m) of the seed report §3.4.5, placed on the sensor's rays as the
+//! fog paper's perturbation step 3 describes (seed 004 §4.2).
+//!
+//! For each kind, the number of returns of a scan is Poisson with the
+//! table's expected count at the MOR; each return draws its range and
+//! calibrated reflectivity from the table's (truncated) Gaussian laws and a
+//! ray: a ring drawn uniformly among the rings the input scan has, and an
+//! azimuth drawn uniformly on the sensor's azimuth grid. Then, on that ray:
+//!
+//! - if the ray has returns (after vanishing), one of them is the return of
+//!   the firing the soft target interrupts (drawn uniformly: an accumulated
+//!   recording holds many revolutions of the same ray). When the soft target
+//!   is closer, it **replaces** that return: same beam direction, same ring
+//!   and time, the soft target's range and reflectivity. When it is farther,
+//!   the target hides it: it is **occluded** and nothing changes;
+//! - if the ray has no return (sky, or everything on it vanished), the soft
+//!   target is the only echo: it is **added** on the grid ray, at the ring's
+//!   elevation (from the sensor description, else measured on the scan as
+//!   `atan2(Σz, Σ√(x²+y²))` over the ring's points).
+//!
+//! Draws happen in a fixed order from one stream (ghost count, ring count,
+//! then per return: ring, azimuth, range, reflectivity, pick, time), so the
+//! result does not depend on threads.
+
+use std::collections::HashMap;
+
+use murk_types::{LidarSpec, PointCloud};
+use rand::RngExt;
+use rand::rngs::ChaCha8Rng;
+use rand_distr::{Distribution, Poisson};
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::applier::NearLaw;
+use crate::error::InferError;
+use crate::sampling::{CHUNK, Purpose, ScanSeed};
+
+/// What became of the near-range returns of one kind in one scan.
+#[derive(Debug, Clone, PartialEq, Serialize, Default)]
+#[non_exhaustive]
+pub struct NearRangeCounts {
+    /// Expected count per scan (the Poisson mean).
+    pub expected: f64,
+    /// Where the expectation comes from: `count_law` or `points_per_scan`.
+    pub count_source: &'static str,
+    /// Returns drawn.
+    pub drawn: u64,
+    /// Returns that replaced a farther return of their ray.
+    pub replaced: u64,
+    /// Returns added on an empty ray.
+    pub added: u64,
+    /// Returns hidden by a closer return on their ray (or by a later, closer
+    /// soft target on the same return).
+    pub occluded: u64,
+    /// Returns that could not be placed: the scan has no ring to put them on.
+    pub unplaced: u64,
+}
+
+impl NearRangeCounts {
+    /// Adds another scan's counts (the expectation adds too).
+    pub fn add(&mut self, o: &NearRangeCounts) {
+        self.expected += o.expected;
+        if self.count_source.is_empty() {
+            self.count_source = o.count_source;
+        }
+        self.drawn += o.drawn;
+        self.replaced += o.replaced;
+        self.added += o.added;
+        self.occluded += o.occluded;
+        self.unplaced += o.unplaced;
+    }
+
+    /// Returns present in the output (replaced + added).
+    pub fn in_output(&self) -> u64 {
+        self.replaced + self.added
+    }
+}
+
+/// Settings the near-range step needs.
+pub(crate) struct NearSettings<'a> {
+    pub ghost: Option<&'a NearLaw>,
+    pub ring: Option<&'a NearLaw>,
+    pub lidar: Option<&'a LidarSpec>,
+    pub azimuth_resolution_deg: f64,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Outcome {
+    Replaced,
+    Added,
+    Occluded,
+    Unplaced,
+}
+
+/// One drawn soft target.
+struct Event {
+    ghost: bool,
+    ring: u16,
+    bin: u64,
+    distance: f64,
+    reflectivity: f64,
+    pick: f64,
+    time: f64,
+    /// Wedge edges (unit vectors) of the azimuth bin.
+    d0: (f32, f32),
+    d1: (f32, f32),
+}
+
+/// The distinct ring ids of `cloud`, ascending.
+fn present_rings(cloud: &PointCloud) -> Vec<u16> {
+    const WORDS: usize = 1 << 10; // 65536 bits
+    let bits = cloud
+        .ring
+        .par_chunks(CHUNK)
+        .map(|c| {
+            let mut b = vec![0u64; WORDS];
+            for &r in c {
+                b[(r >> 6) as usize] |= 1 << (r & 63);
+            }
+            b
+        })
+        .reduce(
+            || vec![0u64; WORDS],
+            |mut a, b| {
+                for (x, y) in a.iter_mut().zip(&b) {
+                    *x |= y;
+                }
+                a
+            },
+        );
+    (0..=u16::MAX)
+        .filter(|&r| bits[(r >> 6) as usize] >> (r & 63) & 1 == 1)
+        .collect()
+}
+
+fn poisson(rng: &mut ChaCha8Rng, lambda: f64) -> u64 {
+    if lambda > 0.0 {
+        // `NearLaw::new` bounds λ, so construction cannot fail.
+        Poisson::new(lambda).map_or(0, |p| p.sample(rng) as u64)
+    } else {
+        0
+    }
+}
+
+/// Adds the near-range returns of one scan to `out` (the scan after
+/// vanishing and perturbation); `input` is the scan as read.
+pub(crate) fn add_near_range(
+    input: &PointCloud,
+    out: &mut PointCloud,
+    s: &NearSettings<'_>,
+    seed: ScanSeed,
+    key: &str,
+    warnings: &mut Vec<String>,
+) -> Result<(Option<NearRangeCounts>, Option<NearRangeCounts>), InferError> {
+    let mut rng = seed.rng(Purpose::NearRange, 0);
+    let n_ghost = s.ghost.map_or(0, |l| poisson(&mut rng, l.expected));
+    let n_ring = s.ring.map_or(0, |l| poisson(&mut rng, l.expected));
+
+    let mut rings = present_rings(input);
+    if let Some(spec) = s.lidar {
+        if let Some(&bad) = rings.iter().find(|&&r| r as usize >= spec.rings()) {
+            let point = input.ring.iter().position(|&r| r == bad).unwrap_or(0);
+            return Err(InferError::RingOutsideSpec {
+                scan: key.to_string(),
+                point,
+                ring: bad,
+                rings: spec.rings(),
+            });
+        }
+        if rings.is_empty() {
+            rings = (0..spec.rings() as u16).collect();
+        }
+    }
+
+    let res = s.azimuth_resolution_deg;
+    let bins = ((360.0 / res).round() as u64).max(1);
+    let (tmin, tmax) = match &input.time {
+        Some(t) if !t.is_empty() => t
+            .par_iter()
+            .fold(
+                || (f32::INFINITY, f32::NEG_INFINITY),
+                |(a, b), &v| (a.min(v), b.max(v)),
+            )
+            .reduce(
+                || (f32::INFINITY, f32::NEG_INFINITY),
+                |(a, b), (c, d)| (a.min(c), b.max(d)),
+            ),
+        _ => (0.0, 0.0),
+    };
+
+    let mut events = Vec::with_capacity((n_ghost + n_ring) as usize);
+    for (law, n, ghost) in [(s.ghost, n_ghost, true), (s.ring, n_ring, false)] {
+        let Some(law) = law else { continue };
+        for _ in 0..n {
+            let ring_u: f64 = rng.random();
+            let bin = rng.random_range(0..bins);
+            let distance = law.distance.sample(&mut rng);
+            let reflectivity = law.reflectivity.sample(&mut rng);
+            let pick: f64 = rng.random();
+            let time_u: f64 = rng.random();
+            let ring = if rings.is_empty() {
+                u16::MAX
+            } else {
+                rings[((ring_u * rings.len() as f64) as usize).min(rings.len() - 1)]
+            };
+            let a0 = ((bin as f64 - 0.5) * res).to_radians();
+            let a1 = ((bin as f64 + 0.5) * res).to_radians();
+            events.push(Event {
+                ghost,
+                ring,
+                bin,
+                distance,
+                reflectivity,
+                pick,
+                time: tmin as f64 + time_u * (tmax as f64 - tmin as f64),
+                d0: (a0.cos() as f32, a0.sin() as f32),
+                d1: (a1.cos() as f32, a1.sin() as f32),
+            });
+        }
+    }
+
+    let mut outcome = vec![Outcome::Unplaced; events.len()];
+    if rings.is_empty() && !events.is_empty() {
+        warnings.push(format!(
+            "scan {key}: {} near-range returns not placed: the scan has no point, hence no ring, and no sensor description was given",
+            events.len()
+        ));
+    } else if !events.is_empty() {
+        place(input, out, s, &events, &mut outcome, bins, res);
+    }
+
+    let tally = |law: Option<&NearLaw>, ghost: bool| {
+        law.map(|l| {
+            let mut c = NearRangeCounts {
+                expected: l.expected,
+                count_source: l.count_source,
+                ..NearRangeCounts::default()
+            };
+            for (e, o) in events.iter().zip(&outcome) {
+                if e.ghost != ghost {
+                    continue;
+                }
+                c.drawn += 1;
+                match o {
+                    Outcome::Replaced => c.replaced += 1,
+                    Outcome::Added => c.added += 1,
+                    Outcome::Occluded => c.occluded += 1,
+                    Outcome::Unplaced => c.unplaced += 1,
+                }
+            }
+            c
+        })
+    };
+    Ok((tally(s.ghost, true), tally(s.ring, false)))
+}
+
+/// Matches events to the returns of their rays and applies them.
+fn place(
+    input: &PointCloud,
+    out: &mut PointCloud,
+    s: &NearSettings<'_>,
+    events: &[Event],
+    outcome: &mut [Outcome],
+    _bins: u64,
+    res: f64,
+) {
+    // Events by ring.
+    let max_ring = events.iter().map(|e| e.ring).max().unwrap_or(0) as usize;
+    let mut by_ring: Vec<Vec<u32>> = vec![Vec::new(); max_ring + 1];
+    for (i, e) in events.iter().enumerate() {
+        by_ring[e.ring as usize].push(i as u32);
+    }
+
+    // Candidate returns of every event, in point order.
+    let found: Vec<Vec<(u32, u32)>> = out
+        .x
+        .par_chunks(CHUNK)
+        .zip(out.y.par_chunks(CHUNK))
+        .zip(out.ring.par_chunks(CHUNK))
+        .enumerate()
+        .map(|(c, ((x, y), ring))| {
+            let mut hits = Vec::new();
+            for i in 0..x.len() {
+                let Some(list) = by_ring.get(ring[i] as usize) else {
+                    continue;
+                };
+                for &e in list {
+                    let ev = &events[e as usize];
+                    let c0 = ev.d0.0 * y[i] - ev.d0.1 * x[i];
+                    let c1 = ev.d1.0 * y[i] - ev.d1.1 * x[i];
+                    if c0 >= 0.0 && c1 < 0.0 {
+                        hits.push((e, (c * CHUNK + i) as u32));
+                    }
+                }
+            }
+            hits
+        })
+        .collect();
+    let mut candidates: Vec<Vec<usize>> = vec![Vec::new(); events.len()];
+    for hits in &found {
+        for &(e, i) in hits {
+            candidates[e as usize].push(i as usize);
+        }
+    }
+
+    // Elevation of the rings that need one (added returns, no description).
+    let needs: Vec<bool> = {
+        let mut v = vec![false; max_ring + 1];
+        if s.lidar.is_none() {
+            for (e, c) in events.iter().zip(&candidates) {
+                if c.is_empty() {
+                    v[e.ring as usize] = true;
+                }
+            }
+        }
+        v
+    };
+    let elevation: Vec<f64> = match s.lidar {
+        Some(spec) => (0..=max_ring)
+            .map(|r| {
+                spec.elevation_deg
+                    .get(r)
+                    .copied()
+                    .unwrap_or(0.0)
+                    .to_radians()
+            })
+            .collect(),
+        None if needs.iter().any(|&b| b) => measured_elevation(input, &needs),
+        None => vec![0.0; max_ring + 1],
+    };
+
+    let scale = out.intensity_scale;
+    let mut owner: HashMap<usize, usize> = HashMap::new();
+    let mut added = Vec::new();
+    for (e, ev) in events.iter().enumerate() {
+        let cand = &candidates[e];
+        if cand.is_empty() {
+            outcome[e] = Outcome::Added;
+            added.push(e);
+            continue;
+        }
+        let j = cand[((ev.pick * cand.len() as f64) as usize).min(cand.len() - 1)];
+        let (px, py, pz) = (out.x[j] as f64, out.y[j] as f64, out.z[j] as f64);
+        let r = (px * px + py * py + pz * pz).sqrt();
+        if ev.distance < r && r > 0.0 {
+            let f = ev.distance / r;
+            out.x[j] = (px * f) as f32;
+            out.y[j] = (py * f) as f32;
+            out.z[j] = (pz * f) as f32;
+            out.intensity[j] = scale.from_calibrated(ev.reflectivity as f32);
+            if let Some(prev) = owner.insert(j, e) {
+                outcome[prev] = Outcome::Occluded;
+            }
+            outcome[e] = Outcome::Replaced;
+        } else {
+            outcome[e] = Outcome::Occluded;
+        }
+    }
+    for e in added {
+        let ev = &events[e];
+        let el = elevation[ev.ring as usize];
+        let az = (ev.bin as f64 * res).to_radians();
+        let (x, y, z) = (
+            ev.distance * el.cos() * az.cos(),
+            ev.distance * el.cos() * az.sin(),
+            ev.distance * el.sin(),
+        );
+        let it = scale.from_calibrated(ev.reflectivity as f32);
+        if out.time.is_some() {
+            out.push_timed(x as f32, y as f32, z as f32, it, ev.ring, ev.time as f32);
+        } else {
+            out.push(x as f32, y as f32, z as f32, it, ev.ring);
+        }
+    }
+}
+
+/// `atan2(Σz, Σ√(x²+y²))` over the points of each ring flagged in `needs`.
+fn measured_elevation(input: &PointCloud, needs: &[bool]) -> Vec<f64> {
+    let n = needs.len();
+    let per_chunk = input
+        .x
+        .par_chunks(CHUNK)
+        .zip(input.y.par_chunks(CHUNK))
+        .zip(input.z.par_chunks(CHUNK))
+        .zip(input.ring.par_chunks(CHUNK))
+        .map(|(((x, y), z), ring)| {
+            let mut acc = vec![(0f64, 0f64); n];
+            for i in 0..x.len() {
+                let r = ring[i] as usize;
+                if r < n && needs[r] {
+                    acc[r].0 += z[i] as f64;
+                    acc[r].1 += (x[i] as f64).hypot(y[i] as f64);
+                }
+            }
+            acc
+        })
+        // Collected, then summed in chunk order: a rayon `reduce` would add
+        // in a thread-dependent order, and f64 addition is not associative.
+        .collect::<Vec<_>>();
+    let mut sums = vec![(0f64, 0f64); n];
+    for acc in &per_chunk {
+        for (p, q) in sums.iter_mut().zip(acc) {
+            p.0 += q.0;
+            p.1 += q.1;
+        }
+    }
+    sums.iter().map(|&(sz, sh)| sz.atan2(sh)).collect()
+}

@@ -1,0 +1,123 @@
+//! What an application did, per scan and per batch: counts a user (or a
+//! script reading the JSON) checks against expectations.
+
+use serde::Serialize;
+
+use crate::near::NearRangeCounts;
+
+/// The format tag of a batch report.
+pub const SUMMARY_FORMAT: &str = "murk-apply-summary/1";
+
+/// Counts of one reflectivity band.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[non_exhaustive]
+pub struct BandSummary {
+    /// Lower edge (inclusive), calibrated reflectivity.
+    pub reflectivity_min: f64,
+    /// Upper edge (exclusive); null when unbounded.
+    pub reflectivity_max: Option<f64>,
+    /// Input points in the band (points below the lowest band are counted
+    /// in it, points above the highest in it; see `below_bands` /
+    /// `above_bands`).
+    pub points_in: u64,
+    /// Of those, points that vanished.
+    pub vanished: u64,
+}
+
+/// What applying did to one scan (or, summed, to a batch).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[non_exhaustive]
+pub struct ApplySummary {
+    /// The scan's key (its relative path in a batch; `total` for sums).
+    pub scan: String,
+    /// True when the weather is clear (MOR ≥ the clear threshold, or a rain
+    /// rate of 0) and the output is the input.
+    pub identity: bool,
+    /// Points read.
+    pub points_in: u64,
+    /// Points written.
+    pub points_out: u64,
+    /// Input points removed by vanishing.
+    pub vanished: u64,
+    /// Per reflectivity band of the model.
+    pub bands: Vec<BandSummary>,
+    /// Input points whose reflectivity lies below the lowest band (they
+    /// follow the lowest band's slope).
+    pub below_bands: u64,
+    /// Input points at or above the highest band's upper edge (they follow
+    /// the highest band's slope).
+    pub above_bands: u64,
+    /// Ghost returns (null when near-range returns are off or the table has
+    /// no ghost law).
+    pub ghost: Option<NearRangeCounts>,
+    /// Ring returns (null likewise).
+    pub ring: Option<NearRangeCounts>,
+    /// Kept points whose range got Gaussian noise (0 when off).
+    pub range_noise_points: u64,
+    /// Kept points whose intensity was attenuated (0 when off).
+    pub attenuated_points: u64,
+    /// Anything the user should know (e.g. near-range returns not placed).
+    pub warnings: Vec<String>,
+}
+
+impl ApplySummary {
+    /// An all-zero summary named `scan` with the given bands.
+    pub(crate) fn empty(scan: &str, bands: &[crate::BandRule]) -> Self {
+        ApplySummary {
+            scan: scan.to_string(),
+            identity: false,
+            points_in: 0,
+            points_out: 0,
+            vanished: 0,
+            bands: bands
+                .iter()
+                .map(|b| BandSummary {
+                    reflectivity_min: b.reflectivity_min,
+                    reflectivity_max: b.reflectivity_max,
+                    points_in: 0,
+                    vanished: 0,
+                })
+                .collect(),
+            below_bands: 0,
+            above_bands: 0,
+            ghost: None,
+            ring: None,
+            range_noise_points: 0,
+            attenuated_points: 0,
+            warnings: Vec::new(),
+        }
+    }
+
+    /// Adds another scan's counts (warnings are concatenated; `identity`
+    /// stays true only if both are).
+    pub fn add(&mut self, o: &ApplySummary) {
+        self.identity &= o.identity;
+        self.points_in += o.points_in;
+        self.points_out += o.points_out;
+        self.vanished += o.vanished;
+        for (a, b) in self.bands.iter_mut().zip(&o.bands) {
+            a.points_in += b.points_in;
+            a.vanished += b.vanished;
+        }
+        self.below_bands += o.below_bands;
+        self.above_bands += o.above_bands;
+        for (mine, theirs) in [(&mut self.ghost, &o.ghost), (&mut self.ring, &o.ring)] {
+            if let Some(t) = theirs {
+                mine.get_or_insert_with(NearRangeCounts::default).add(t);
+            }
+        }
+        self.range_noise_points += o.range_noise_points;
+        self.attenuated_points += o.attenuated_points;
+        self.warnings.extend(o.warnings.iter().cloned());
+    }
+
+    /// Fraction of input points kept unchanged by vanishing (1 for an empty
+    /// scan).
+    pub fn kept_fraction(&self) -> f64 {
+        if self.points_in == 0 {
+            1.0
+        } else {
+            (self.points_in - self.vanished) as f64 / self.points_in as f64
+        }
+    }
+}

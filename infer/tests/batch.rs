@@ -1,0 +1,255 @@
+//! Batch planning and running over real files in a temporary folder.
+
+// Point clouds are columns (SoA): one index addresses several of them.
+#![allow(clippy::needless_range_loop)]
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::*;
+use murk_infer::batch::{plan, run};
+use murk_infer::{ApplyParams, BatchOptions, InferError, Severity};
+use murk_io::{ReadOptions, read_cloud, write_cloud};
+use murk_types::{PointCloud, PointFormat, WeatherClass};
+
+fn scan(n: usize, salt: u64) -> PointCloud {
+    let mut c = synthetic_scan(n, salt);
+    c.time = None;
+    c
+}
+
+/// `root/a.pcd`, `root/sub/b.bin` (KITTI scale), `root/notes.txt`.
+fn tree(root: &Path) -> (PointCloud, PointCloud) {
+    std::fs::create_dir_all(root.join("sub")).unwrap();
+    let a = scan(5_000, 1);
+    write_cloud(&root.join("a.pcd"), &a, PointFormat::Pcd).unwrap();
+    let mut b = scan(3_000, 2);
+    b.to_scale(murk_types::IntensityScale::KITTI);
+    write_cloud(&root.join("sub/b.bin"), &b, PointFormat::KittiBin).unwrap();
+    std::fs::write(root.join("notes.txt"), "not a cloud").unwrap();
+    (a, b)
+}
+
+fn fog(mor: f64) -> murk_infer::Applier {
+    ApplyParams::new(WeatherClass::Fog, Severity::Mor(mor))
+        .near_range(true)
+        .range_noise_m(0.02)
+        .seed(4)
+        .build(&seed_table())
+        .unwrap()
+}
+
+#[test]
+fn folder_is_walked_names_kept_and_non_clouds_listed() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("in");
+    let out = dir.path().join("out");
+    tree(&input);
+    let p = plan(std::slice::from_ref(&input), &out, &BatchOptions::default()).unwrap();
+    let keys: Vec<&str> = p.jobs.iter().map(|j| j.key.as_str()).collect();
+    assert_eq!(keys, ["a.pcd", "sub/b.bin"]);
+    assert_eq!(p.skipped.len(), 1);
+    assert!(p.skipped[0].path.ends_with("notes.txt"));
+    let report = run(&fog(60.0), &p, &BatchOptions::default(), &|_| {}).unwrap();
+    assert!(out.join("a.pcd").is_file() && out.join("sub/b.bin").is_file());
+    assert_eq!(report.files.len(), 2);
+    let t = &report.totals;
+    assert_eq!(t.points_in, 8_000);
+    assert_eq!(
+        t.points_out,
+        t.points_in - t.vanished + t.ghost.as_ref().unwrap().added + t.ring.as_ref().unwrap().added
+    );
+    let json = report.to_json();
+    assert!(
+        json.contains("\"format\": \"murk-apply-summary/1\""),
+        "{json}"
+    );
+    assert!(json.contains("notes.txt"));
+}
+
+#[test]
+fn same_format_keeps_the_input_scale_and_kept_points_bit_for_bit() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("in");
+    let out = dir.path().join("out");
+    let (_, b) = tree(&input);
+    let a = ApplyParams::new(WeatherClass::Fog, Severity::Mor(60.0))
+        .build(&seed_table())
+        .unwrap();
+    let p = plan(&[input.join("sub/b.bin")], &out, &BatchOptions::default()).unwrap();
+    run(&a, &p, &BatchOptions::default(), &|_| {}).unwrap();
+    let back = read_cloud(&out.join("b.bin"), &ReadOptions::default()).unwrap();
+    let b_read = read_cloud(&input.join("sub/b.bin"), &ReadOptions::default()).unwrap();
+    let (expected, _) = a.apply(&b_read, "b.bin").unwrap();
+    assert_eq!(
+        back.intensity, expected.intensity,
+        "raw KITTI intensities kept"
+    );
+    assert!(back.len() < b.len());
+}
+
+#[test]
+fn clear_weather_writes_the_input_bytes_back() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("in");
+    let out = dir.path().join("out");
+    tree(&input);
+    let p = plan(std::slice::from_ref(&input), &out, &BatchOptions::default()).unwrap();
+    run(&fog(5000.0), &p, &BatchOptions::default(), &|_| {}).unwrap();
+    for name in ["a.pcd", "sub/b.bin"] {
+        assert_eq!(
+            std::fs::read(input.join(name)).unwrap(),
+            std::fs::read(out.join(name)).unwrap(),
+            "{name}"
+        );
+    }
+}
+
+#[test]
+fn output_bytes_do_not_depend_on_thread_count() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("in");
+    tree(&input);
+    let mut outputs = Vec::new();
+    for threads in [1, 2] {
+        let out = dir.path().join(format!("out{threads}"));
+        let p = plan(std::slice::from_ref(&input), &out, &BatchOptions::default()).unwrap();
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| run(&fog(30.0), &p, &BatchOptions::default(), &|_| {}).unwrap());
+        outputs.push(
+            ["a.pcd", "sub/b.bin"]
+                .map(|n| std::fs::read(out.join(n)).unwrap())
+                .to_vec(),
+        );
+    }
+    assert_eq!(outputs[0], outputs[1]);
+}
+
+#[test]
+fn format_change_renames_and_converts_intensity_scale() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("in");
+    let out = dir.path().join("out");
+    let (_, b) = tree(&input);
+    let opts = BatchOptions {
+        format: Some(PointFormat::Pcd),
+        ..BatchOptions::default()
+    };
+    let p = plan(&[input.join("sub/b.bin")], &out, &opts).unwrap();
+    assert_eq!(p.jobs[0].key, "b.pcd");
+    let a = fog(5000.0);
+    run(&a, &p, &opts, &|_| {}).unwrap();
+    let back = read_cloud(&out.join("b.pcd"), &ReadOptions::default()).unwrap();
+    // PCD is read as calibrated: the KITTI 0–1 values were converted.
+    let mut cal = b.clone();
+    cal.to_calibrated();
+    for (x, y) in back.intensity.iter().zip(&cal.intensity) {
+        assert!((x - y).abs() < 1e-3, "{x} vs {y}");
+    }
+}
+
+#[test]
+fn output_folder_equal_to_input_folder_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    tree(dir.path());
+    let e = plan(
+        &[dir.path().to_path_buf()],
+        dir.path(),
+        &BatchOptions::default(),
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("output folder"), "{e}");
+}
+
+#[test]
+fn output_overwriting_an_input_file_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    tree(dir.path());
+    let e = plan(
+        &[dir.path().join("a.pcd")],
+        dir.path(),
+        &BatchOptions::default(),
+    )
+    .unwrap_err();
+    assert!(matches!(e, InferError::OutputIsInput { .. }), "{e}");
+    assert!(e.to_string().contains("a.pcd"), "{e}");
+}
+
+#[test]
+fn two_inputs_with_the_same_name_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let (x, y) = (dir.path().join("x"), dir.path().join("y"));
+    for d in [&x, &y] {
+        std::fs::create_dir_all(d).unwrap();
+        write_cloud(&d.join("s.pcd"), &scan(10, 1), PointFormat::Pcd).unwrap();
+    }
+    let e = plan(
+        &[x.join("s.pcd"), y.join("s.pcd")],
+        &dir.path().join("out"),
+        &BatchOptions::default(),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("s.pcd") && e.contains("like"), "{e}");
+}
+
+#[test]
+fn explicit_file_of_unknown_format_is_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    tree(dir.path());
+    let e = plan(
+        &[dir.path().join("notes.txt")],
+        &dir.path().join("out"),
+        &BatchOptions::default(),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("notes.txt") && e.contains("txt"), "{e}");
+}
+
+#[test]
+fn missing_input_is_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let e = plan(
+        &[PathBuf::from("/definitely/not/here.pcd")],
+        &dir.path().join("out"),
+        &BatchOptions::default(),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("/definitely/not/here.pcd"), "{e}");
+}
+
+#[test]
+fn bad_file_error_names_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("broken.bin"), [0u8; 7]).unwrap();
+    let p = plan(
+        &[dir.path().join("broken.bin")],
+        &dir.path().join("out"),
+        &BatchOptions::default(),
+    )
+    .unwrap();
+    let e = run(&fog(50.0), &p, &BatchOptions::default(), &|_| {})
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("broken.bin"), "{e}");
+    assert!(!dir.path().join("out/broken.bin").exists());
+}
+
+#[test]
+fn output_folder_inside_the_input_folder_is_not_read_back() {
+    let dir = tempfile::tempdir().unwrap();
+    tree(dir.path());
+    let out = dir.path().join("degraded");
+    let p = plan(&[dir.path().to_path_buf()], &out, &BatchOptions::default()).unwrap();
+    run(&fog(50.0), &p, &BatchOptions::default(), &|_| {}).unwrap();
+    // A second run over the same folder ignores the outputs of the first.
+    let p2 = plan(&[dir.path().to_path_buf()], &out, &BatchOptions::default()).unwrap();
+    assert_eq!(p2.jobs.len(), 2);
+    assert!(p2.skipped.iter().any(|s| s.reason == "the output folder"));
+}

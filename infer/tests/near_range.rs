@@ -1,0 +1,253 @@
+//! Near-range returns (seed 004 §4.2 step 3) and seeded determinism.
+
+// Point clouds are columns (SoA): one index addresses several of them.
+#![allow(clippy::needless_range_loop)]
+
+mod common;
+
+use common::*;
+use murk_infer::{ApplyParams, Severity};
+use murk_types::{CountLaw, IntensityScale, LidarSpec, PointCloud, WeatherClass};
+
+/// A cylinder wall at `radius` metres seen by every VLP-16 ring on a 0.2°
+/// grid (one revolution, every ray filled).
+fn wall(radius: f64) -> PointCloud {
+    let spec = LidarSpec::vlp16();
+    let mut c = PointCloud::with_capacity(16 * 1800);
+    for bin in 0..1800 {
+        let az = (bin as f64 * 0.2).to_radians();
+        for (ring, el) in spec.elevation_deg.iter().enumerate() {
+            let el = el.to_radians();
+            let r = radius / el.cos();
+            c.push(
+                (r * el.cos() * az.cos()) as f32,
+                (r * el.cos() * az.sin()) as f32,
+                (r * el.sin()) as f32,
+                60.0,
+                ring as u16,
+            );
+        }
+    }
+    c
+}
+
+fn near(mor: f64, seed: u64) -> murk_infer::Applier {
+    ApplyParams::new(WeatherClass::Fog, Severity::Mor(mor))
+        .near_range(true)
+        .seed(seed)
+        .build(&seed_table())
+        .unwrap()
+}
+
+#[test]
+fn closer_soft_targets_replace_the_return_of_their_ray() {
+    // Wall at 12 m, inside the vanishing distance at MOR 100 (34.6 m):
+    // nothing vanishes, every ghost (3–10 m) and ring (0.5–3 m) return is
+    // closer than the wall, so each replaces one wall return.
+    let c = wall(12.0);
+    let (out, s) = near(100.0, 1).apply(&c, "wall").unwrap();
+    let g = s.ghost.clone().unwrap();
+    let r = s.ring.clone().unwrap();
+    assert_eq!(s.vanished, 0);
+    assert!(g.drawn > 10 && r.drawn > 0, "{g:?} {r:?}");
+    assert_eq!(g.added + g.unplaced + r.added + r.unplaced, 0);
+    // Two soft targets on the same wall return: the later closer one wins
+    // and the earlier is counted occluded, so replaced + occluded = drawn.
+    assert_eq!(g.replaced + g.occluded, g.drawn);
+    assert_eq!(r.replaced + r.occluded, r.drawn);
+    assert_eq!(out.len(), c.len(), "replacement keeps the point count");
+    assert_eq!(s.points_out, c.len() as u64);
+    let mut changed = 0;
+    for i in 0..c.len() {
+        if out.x[i] != c.x[i] || out.y[i] != c.y[i] || out.z[i] != c.z[i] {
+            changed += 1;
+            // Same beam: direction kept, ring kept.
+            let ri = c.range(i) as f64;
+            let ro = out.range(i) as f64;
+            assert!(ro < ri && ro > 0.5 - 1e-4 && ro < 10.0 + 1e-4, "{ro}");
+            assert!((out.x[i] as f64 / ro - c.x[i] as f64 / ri).abs() < 1e-5);
+            assert!((out.z[i] as f64 / ro - c.z[i] as f64 / ri).abs() < 1e-5);
+            assert_eq!(out.ring[i], c.ring[i]);
+            assert!(out.intensity[i] >= 0.0);
+        }
+    }
+    assert_eq!(changed as u64, g.replaced + r.replaced);
+}
+
+#[test]
+fn farther_soft_targets_are_occluded() {
+    // Wall at 0.3 m: closer than any ghost or ring return (≥ 0.5 m).
+    let c = wall(0.3);
+    let (out, s) = near(100.0, 2).apply(&c, "near wall").unwrap();
+    let g = s.ghost.unwrap();
+    assert!(g.drawn > 0);
+    assert_eq!(g.occluded, g.drawn);
+    let r = s.ring.unwrap();
+    assert_eq!(r.occluded, r.drawn);
+    assert_eq!(out, c);
+}
+
+#[test]
+fn soft_targets_on_empty_rays_are_added_on_the_grid() {
+    // No return at all: every soft target is added on its grid ray, at the
+    // ring elevation of the sensor description, inside its distance window.
+    let spec = LidarSpec::vlp16();
+    let a = ApplyParams::new(WeatherClass::Fog, Severity::Mor(100.0))
+        .near_range(true)
+        .lidar(spec.clone())
+        .seed(5)
+        .build(&seed_table())
+        .unwrap();
+    let empty = PointCloud::with_capacity(0);
+    let (out, s) = a.apply(&empty, "sky").unwrap();
+    let g = s.ghost.unwrap();
+    let r = s.ring.unwrap();
+    assert_eq!(g.added, g.drawn);
+    assert_eq!(r.added, r.drawn);
+    assert_eq!(out.len() as u64, g.drawn + r.drawn);
+    for i in 0..out.len() {
+        let el = out.elevation_deg(i) as f64;
+        assert!(
+            (el - spec.elevation_deg[out.ring[i] as usize]).abs() < 1e-3,
+            "ring {} elevation {el}",
+            out.ring[i]
+        );
+        let az = out.azimuth_deg(i) as f64;
+        let k = az / 0.2;
+        assert!(
+            (k - k.round()).abs() < 1e-2,
+            "azimuth {az} off the 0.2° grid"
+        );
+        let range = out.range(i);
+        let ghost = i < g.drawn as usize;
+        let (lo, hi) = if ghost { (3.0, 10.0) } else { (0.5, 3.0) };
+        assert!(range >= lo - 1e-4 && range <= hi + 1e-4, "{range}");
+    }
+}
+
+#[test]
+fn without_a_description_ring_elevations_are_measured_on_the_scan() {
+    // Only ring 3 (3°) present, and only in one azimuth quadrant: soft
+    // targets on other azimuths are added at 3° elevation.
+    let mut c = PointCloud::with_capacity(0);
+    for i in 0..90 {
+        let az = (i as f64).to_radians();
+        let el = 3f64.to_radians();
+        c.push(
+            (20.0 * el.cos() * az.cos()) as f32,
+            (20.0 * el.cos() * az.sin()) as f32,
+            (20.0 * el.sin()) as f32,
+            40.0,
+            3,
+        );
+    }
+    let (out, s) = near(60.0, 9).apply(&c, "quadrant").unwrap();
+    let g = s.ghost.unwrap();
+    assert!(g.added > 0);
+    for i in c.len()..out.len() {
+        assert_eq!(out.ring[i], 3);
+        assert!((out.elevation_deg(i) - 3.0).abs() < 1e-3);
+    }
+}
+
+#[test]
+fn ring_outside_the_description_is_an_error_with_the_point() {
+    let mut c = wall(12.0);
+    c.ring[77] = 40;
+    let a = ApplyParams::new(WeatherClass::Fog, Severity::Mor(100.0))
+        .near_range(true)
+        .lidar(LidarSpec::vlp16())
+        .build(&seed_table())
+        .unwrap();
+    let e = a.apply(&c, "hdl.pcd").unwrap_err().to_string();
+    assert!(
+        e.contains("hdl.pcd") && e.contains("point 77") && e.contains("ring 40"),
+        "{e}"
+    );
+}
+
+#[test]
+fn count_is_poisson_with_the_count_law_mean() {
+    // N(MOR) = 20·(100/MOR)^1.5 ghost returns: 160 at MOR 25. Over 50 seeds
+    // the mean count is within 4 standard errors (√(160/50) ≈ 1.8).
+    let mut t = seed_table();
+    let fog = t.weathers.get_mut(&WeatherClass::Fog).unwrap();
+    fog.ghost.as_mut().unwrap().count_law = Some(CountLaw::Power {
+        n_ref: 20.0,
+        mor_ref_m: 100.0,
+        exponent: 1.5,
+    });
+    let c = wall(2.0);
+    let mut total = 0;
+    for seed in 0..50 {
+        let a = ApplyParams::new(WeatherClass::Fog, Severity::Mor(25.0))
+            .near_range(true)
+            .seed(seed)
+            .build(&t)
+            .unwrap();
+        let (_, s) = a.apply(&c, "w").unwrap();
+        let g = s.ghost.unwrap();
+        assert_eq!(g.count_source, "count_law");
+        assert!((g.expected - 160.0).abs() < 1e-9);
+        total += g.drawn;
+    }
+    let mean = total as f64 / 50.0;
+    assert!(
+        (mean - 160.0).abs() < 4.0 * (160.0f64 / 50.0).sqrt(),
+        "{mean}"
+    );
+}
+
+#[test]
+fn ghost_reflectivity_is_written_in_the_input_scale() {
+    let mut c = wall(12.0);
+    c.to_scale(IntensityScale::KITTI);
+    let (out, _) = near(100.0, 4).apply(&c, "k").unwrap();
+    assert_eq!(out.intensity_scale, IntensityScale::KITTI);
+    assert!(out.intensity.iter().all(|&v| (0.0..=1.0).contains(&v)));
+}
+
+fn all_options(seed: u64) -> murk_infer::Applier {
+    ApplyParams::new(WeatherClass::Fog, Severity::Mor(40.0))
+        .near_range(true)
+        .near_range_count_scale(5.0)
+        .range_noise_m(0.03)
+        .attenuate_intensity(true)
+        .soft_edge(true)
+        .seed(seed)
+        .build(&seed_table())
+        .unwrap()
+}
+
+#[test]
+fn output_is_identical_for_one_and_two_threads() {
+    let c = synthetic_scan(300_000, 8); // 19 chunks
+    let run = |threads| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| all_options(21).apply(&c, "scan/000001.pcd").unwrap())
+    };
+    let (a, sa) = run(1);
+    let (b, sb) = run(2);
+    assert_eq!(sa, sb);
+    assert!(sa.ghost.as_ref().unwrap().drawn > 0 && sa.vanished > 0);
+    // Bit-level equality, NaN-safe.
+    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(&a.x), bits(&b.x));
+    assert_eq!(bits(&a.intensity), bits(&b.intensity));
+    assert_eq!(a, b);
+}
+
+#[test]
+fn seed_and_key_change_the_draws_and_only_them() {
+    let c = synthetic_scan(50_000, 8);
+    let (a, _) = all_options(1).apply(&c, "a").unwrap();
+    let (a2, _) = all_options(1).apply(&c, "a").unwrap();
+    let (b, _) = all_options(2).apply(&c, "a").unwrap();
+    let (k, _) = all_options(1).apply(&c, "b").unwrap();
+    assert_eq!(a, a2);
+    assert_ne!(a, b);
+    assert_ne!(a, k);
+}
