@@ -149,6 +149,7 @@ fn draw<DB: DrawingBackend>(
             .label_style((FONT, 14))
             .axis_desc_style((FONT, 15))
             .y_labels(ymax.min(6) as usize)
+            .x_label_formatter(&|x| format!("{x:.0}"))
             .draw()
             .map_err(e)?;
         let bars = counts.iter().enumerate().filter(|(_, c)| **c > 0);
