@@ -1,1 +1,95 @@
-//! placeholder
+//! murk-fit: the seed report's LiDAR and radar method (D3.3 §3.4, §4.3), done
+//! right, as a re-derivable coefficient table.
+//!
+//! Point it at a campaign folder and it returns the
+//! [`CoefficientTable`](murk_types::CoefficientTable)
+//! (`weather-noise-coefficients/1`) that `murk apply` uses:
+//!
+//! - **vanishing slopes** per weather and reflectivity band, as the maximum
+//!   likelihood edge of a survival boundary ([`survival`]) — the value
+//!   appliers use — with the seed's quantile estimate beside it
+//!   ([`quantile_slope`]), per-MOR-bin quantiles, censored bins and reasons;
+//! - the **rain conversion** `MOR = a·R + b` and its validity range;
+//! - **ghost and ring** laws (truncated-normal maximum likelihood, see
+//!   [`stats::truncnorm`]) and their **count per scan** as a power law of MOR;
+//! - **no-change rates** for LiDAR and radar per weather with bootstrap
+//!   uncertainties;
+//! - **provenance**: tool, every parameter, SHA-256 of every input file.
+//!
+//! The crate follows linfa's shape: [`FitParams`] (hyperparameters with
+//! defaults) → [`FitParams::check`] → [`FitValidParams::fit`] → a
+//! [`FittedTable`] (the table and the data of its figures).
+//!
+//! **Architecture invariant:** statistics do no I/O. [`reference`],
+//! [`pairing`], [`survival`], [`quantile_slope`], [`radar`] and [`stats`] work
+//! on in-memory values and are unit-tested against known answers; only
+//! [`driver`] reads files (through `murk-io`) and streams recordings, keeping
+//! per-cell and per-bin statistics, never the points of a campaign.
+//!
+//! ```
+//! use murk_fit::FitParams;
+//!
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! // A tiny campaign: one ring of 36 directions, a wall at 4–39 m, two clear
+//! // recordings and two foggy ones in which everything beyond 0.3·MOR is gone.
+//! let dir = tempfile::tempdir()?;
+//! let d = dir.path();
+//! std::fs::write(d.join("campaign.toml"), "\
+//! name = \"demo\"\nrules = \"pdd-2022-2023\"\n[lidar]\nmodel = \"toy\"\n\
+//! elevation_deg = [0.0]\nazimuth_resolution_deg = 10.0\n")?;
+//! std::fs::write(d.join("weather.csv"), "\
+//! recording,timestamp,PWD12_Weather Type,PWD12_Rain intensity (mm/h),PWD12_MOR (m),VS2K_MOR (m),WXT530_Rain intensity (mm/h)
+//! c1,2023-01-14T05:00:00Z,Clear,0,2500,2500,0
+//! c2,2023-01-14T06:00:00Z,Clear,0,2500,2500,0
+//! f1,2023-01-14T07:00:00Z,Fog,0,50,50,0
+//! f2,2023-01-14T08:00:00Z,Fog,0,100,100,0
+//! ")?;
+//! std::fs::create_dir(d.join("lidar"))?;
+//! for (id, mor) in [("c1", 1e9), ("c2", 1e9), ("f1", 50.0), ("f2", 100.0)] {
+//!     let mut csv = String::from("x,y,z,intensity,ring\n");
+//!     for k in 0..36 {
+//!         let (az, r) = ((k as f64 * 10.0 + 5.0).to_radians(), 4.0 + k as f64);
+//!         if r < 0.3 * mor {
+//!             csv += &format!("{},{},0,20,0\n", r * az.cos(), r * az.sin());
+//!         }
+//!     }
+//!     std::fs::write(d.join("lidar").join(format!("{id}.csv")), csv)?;
+//! }
+//!
+//! let campaign = murk_campaign::Campaign::open(d)?;
+//! let params = FitParams::default().min_points_per_bin(1).bootstrap_replicates(0).check()?;
+//! let fitted = params.fit(&campaign)?;
+//! let fog = &fitted.table().weathers[&murk_types::WeatherClass::Fog];
+//! assert_eq!(fog.recordings, 2);
+//! // f1 keeps the 11 returns closer than 15 m, f2 the 26 closer than 30 m.
+//! assert_eq!(fog.no_change_rate, Some((11.0 + 26.0) / 72.0));
+//! assert!(fitted.table().absent.contains_key(&murk_types::WeatherClass::Snow));
+//! # Ok(())
+//! # }
+//! ```
+
+#![deny(missing_docs)]
+
+mod accumulate;
+mod algorithm;
+mod assemble;
+pub mod diagnostics;
+pub mod driver;
+mod error;
+mod hyperparams;
+pub mod pairing;
+pub mod quantile_slope;
+pub mod radar;
+pub mod reference;
+pub mod stats;
+pub mod survival;
+
+pub use accumulate::{RecordingRow, WeatherAcc};
+pub use algorithm::{FittedTable, TOOL, write_atomic};
+pub use assemble::{RainSample, rain_conversion};
+pub use diagnostics::{
+    Diagnostics, NoiseHistograms, PlotHistogram, RangeMorDensity, WeatherDiagnostics,
+};
+pub use driver::{FitInputs, RecordingInput};
+pub use error::FitError;
+pub use hyperparams::{Band, EdgeShape, FitParams, FitValidParams};

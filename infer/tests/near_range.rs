@@ -176,6 +176,8 @@ fn count_is_poisson_with_the_count_law_mean() {
         n_ref: 20.0,
         mor_ref_m: 100.0,
         exponent: 1.5,
+        n_ref_std_error: None,
+        exponent_std_error: None,
     });
     let c = wall(2.0);
     let mut total = 0;

@@ -227,6 +227,14 @@ pub struct Gaussian {
     /// Upper truncation bound, when the law is truncated above.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub upper: Option<f64>,
+    /// Standard error of `mean`, when fitted (inverse curvature of the
+    /// likelihood). A law cut far into its body, such as a reflectivity whose
+    /// mean sits near the floor, is loose in its mean: this says how loose.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mean_std_error: Option<f64>,
+    /// Standard error of `std`, when fitted.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub std_std_error: Option<f64>,
 }
 
 /// Ghost or ring returns of one weather: their laws and how many there are.
@@ -241,7 +249,15 @@ pub struct NoiseLaw {
     /// Returns the laws were fitted on.
     #[serde(default)]
     pub points: u64,
-    /// Count per scan as a function of MOR.
+    /// Share of the returns placed on random rays that stay visible (a
+    /// weather return behind a closer return of its ray is hidden), as
+    /// estimated from the campaign; `points_per_scan` ≈ `visible_fraction` ×
+    /// the count law.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub visible_fraction: Option<f64>,
+    /// Returns to place per scan as a function of MOR, before hiding: an
+    /// applier draws this many on random rays and keeps those in front of
+    /// the ray's return.
     #[serde(default)]
     pub count_law: Option<CountLaw>,
     /// Why `count_law` is null.
@@ -262,6 +278,14 @@ pub enum CountLaw {
         mor_ref_m: f64,
         /// Power-law exponent.
         exponent: f64,
+        /// Standard error of `n_ref` (Poisson likelihood curvature), when
+        /// fitted.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        n_ref_std_error: Option<f64>,
+        /// Standard error of `exponent`, when fitted: a narrow MOR range
+        /// leaves the exponent loose, and this says how loose.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        exponent_std_error: Option<f64>,
     },
 }
 
@@ -273,6 +297,7 @@ impl CountLaw {
                 n_ref,
                 mor_ref_m,
                 exponent,
+                ..
             } => n_ref * (mor_ref_m / mor_m).powf(exponent),
         }
     }
@@ -287,6 +312,13 @@ pub struct RainConversion {
     pub intercept: f64,
     /// Recordings in the fit.
     pub points: u64,
+    /// Standard error of `slope` (ordinary least squares; null with two
+    /// points).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub slope_std_error: Option<f64>,
+    /// Standard error of `intercept`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub intercept_std_error: Option<f64>,
     /// Smallest rain rate in the fit, mm/h.
     #[serde(default)]
     pub rain_rate_min: Option<f64>,
@@ -297,6 +329,20 @@ pub struct RainConversion {
     /// the conversion is meaningless beyond it.
     #[serde(default)]
     pub zero_mor_rain_rate: Option<f64>,
+    /// Ordinary least-squares slope of MOR on the measured rain rate, before
+    /// the correction for gauge noise (null when no correction was made).
+    /// Noise in the measured rate flattens an OLS line (regression
+    /// dilution); `slope` is corrected for it where gauges disagree.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub slope_ols: Option<f64>,
+    /// Ordinary least-squares intercept beside `slope_ols`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub intercept_ols: Option<f64>,
+    /// Reliability of the measured rain rate: the share of its variance
+    /// across recordings that is not gauge noise (1 = noise-free), as
+    /// estimated from the disagreement of the rain gauges.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rain_rate_reliability: Option<f64>,
 }
 
 impl RainConversion {
@@ -492,6 +538,7 @@ impl CoefficientTable {
                         n_ref,
                         mor_ref_m,
                         exponent,
+                        ..
                     }) = &l.count_law
                     {
                         let f = format!("{at}.{name}.count_law");
@@ -637,19 +684,26 @@ mod tests {
                 std,
                 lower: Some(3.0),
                 upper: Some(10.0),
+                mean_std_error: None,
+                std_std_error: None,
             },
             reflectivity: Gaussian {
                 mean: 4.0,
                 std: 11.0,
                 lower: Some(0.0),
                 upper: None,
+                mean_std_error: None,
+                std_std_error: None,
             },
             points_per_scan: 41.0,
             points: 410,
+            visible_fraction: Some(0.9),
             count_law: Some(CountLaw::Power {
                 n_ref: 41.0,
                 mor_ref_m: 100.0,
                 exponent: 1.5,
+                n_ref_std_error: None,
+                exponent_std_error: None,
             }),
             count_law_reason: None,
         }
@@ -736,9 +790,14 @@ mod tests {
             slope: -0.8308,
             intercept: 159.16,
             points: 42,
+            slope_std_error: None,
+            intercept_std_error: None,
             rain_rate_min: None,
             rain_rate_max: None,
             zero_mor_rain_rate: None,
+            slope_ols: None,
+            intercept_ols: None,
+            rain_rate_reliability: None,
         };
         assert!((r.mor(10.0) - 150.852).abs() < 1e-9);
     }

@@ -1,0 +1,320 @@
+//! Per-weather statistics accumulated over recordings.
+//!
+//! A [`WeatherAcc`] is all the driver keeps of a weather's recordings: per
+//! MOR bin the *no change* count per reference cell, the survival histogram
+//! over `ln(r/MOR)`, histograms of ghost and ring distance and reflectivity,
+//! and one small row of scalars per recording. Its size depends on the grid,
+//! the MOR bins and the histogram resolutions, never on the number of points.
+//! Every count is an integer, so merging accumulators in any order gives the
+//! same result; float summaries are computed afterwards from the rows sorted
+//! by recording index.
+
+use std::collections::BTreeMap;
+
+use crate::FitValidParams;
+use crate::pairing::RecordingTally;
+use crate::reference::ClearReference;
+use crate::stats::truncnorm::Histogram;
+use crate::survival::{Partition, SurvivalHistogram};
+
+/// Resolution of the distance histograms, metres.
+pub const DISTANCE_STEP_M: f64 = 0.001;
+/// Resolution of the reflectivity histograms.
+pub const REFLECTIVITY_STEP: f64 = 0.05;
+/// Span of the reflectivity histograms above the floor.
+pub const REFLECTIVITY_SPAN: f64 = 1024.0;
+/// Resolution of the occluder histograms, metres.
+pub const OCCLUDER_STEP_M: f64 = 0.01;
+
+/// The scalars of one recording.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecordingRow {
+    /// Position in the fit's recording list (the merge order).
+    pub index: usize,
+    /// Recording id.
+    pub id: String,
+    /// MOR, metres.
+    pub mor: f64,
+    /// Rain rate, mm/h, when known.
+    pub rain_rate: Option<f64>,
+    /// *No change* returns.
+    pub kept: u64,
+    /// Expected clear returns (the reference's).
+    pub total: u64,
+    /// Ghost returns.
+    pub ghosts: u64,
+    /// Ring returns.
+    pub rings: u64,
+    /// Unpaired returns inside a clear envelope.
+    pub scene: u64,
+    /// Unpaired returns beyond the ghost window.
+    pub far: u64,
+    /// Returns in the file.
+    pub points: u64,
+    /// This recording's returns nearer than the noise windows' far end, per
+    /// step of [`ROW_OCCLUDER_STEP_M`]: what could hide its own ghost and
+    /// ring returns (their visibility varies with the weather's density).
+    pub occluders: Vec<u32>,
+    /// Rays of the recording (cells × revolutions of the reference).
+    pub rays: u64,
+}
+
+/// Resolution of the per-recording occluder histograms, metres.
+pub const ROW_OCCLUDER_STEP_M: f64 = 0.1;
+
+impl RecordingRow {
+    /// Share of this recording's rays open (no return nearer) at the start of
+    /// each step of [`ROW_OCCLUDER_STEP_M`].
+    pub fn open_rays(&self) -> Vec<f64> {
+        let mut acc = 0u64;
+        self.occluders
+            .iter()
+            .map(|&c| {
+                let v = 1.0 - acc as f64 / self.rays.max(1) as f64;
+                acc += c as u64;
+                v.max(0.0)
+            })
+            .collect()
+    }
+}
+
+/// Ghost or ring returns: distance and reflectivity histograms, and what
+/// could hide them.
+///
+/// A weather return placed on a ray is only seen when no other return of the
+/// ray is closer (first-return sensors; the generator and appliers place
+/// them that way). `occluders[k]` counts the returns (scene and noise) with range in
+/// step `k` (of [`OCCLUDER_STEP_M`]), each recording weighted by its number
+/// of ghost (or ring) returns; `exposure` is Σ weight × rays. The share of
+/// rays open at distance `d` is then `1 − Σ_{k ≤ d} occluders / exposure`,
+/// the visibility by which the distance law is seen.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NoiseAcc {
+    /// Range histogram over the class window.
+    pub distance: Histogram,
+    /// Reflectivity histogram from the floor.
+    pub reflectivity: Histogram,
+    /// Weighted occluder counts from 0 m to the window's far end.
+    pub occluders: Vec<u64>,
+    /// Σ weight × rays per recording.
+    pub exposure: u64,
+}
+
+impl NoiseAcc {
+    fn new(window: [f64; 2], floor: f64) -> Self {
+        let db = ((window[1] - window[0]) / DISTANCE_STEP_M).round().max(1.0) as usize;
+        let rb = (REFLECTIVITY_SPAN / REFLECTIVITY_STEP).round() as usize;
+        let ob = (window[1] / OCCLUDER_STEP_M).ceil().max(1.0) as usize;
+        NoiseAcc {
+            distance: Histogram::new(window[0], window[1], db),
+            reflectivity: Histogram::new(floor, floor + REFLECTIVITY_SPAN, rb),
+            occluders: vec![0; ob],
+            exposure: 0,
+        }
+    }
+
+    fn add(&mut self, points: &[(f32, f32)], occluders: &[f32], rays: u64) {
+        for &(r, f) in points {
+            self.distance.add(r as f64);
+            self.reflectivity.add(f as f64);
+        }
+        let w = points.len() as u64;
+        if w == 0 {
+            return;
+        }
+        self.exposure += w * rays;
+        let n = self.occluders.len();
+        for &r in occluders {
+            let k = (r as f64 / OCCLUDER_STEP_M).floor().max(0.0) as usize;
+            if k < n {
+                self.occluders[k] += w;
+            }
+        }
+    }
+
+    fn merge(&mut self, o: &NoiseAcc) {
+        self.distance.merge(&o.distance);
+        self.reflectivity.merge(&o.reflectivity);
+        for (a, b) in self.occluders.iter_mut().zip(&o.occluders) {
+            *a += b;
+        }
+        self.exposure += o.exposure;
+    }
+
+    /// Share of rays open (no closer return) at the start of each
+    /// occluder step; `None` without exposure.
+    pub fn visibility(&self) -> Option<Vec<f64>> {
+        if self.exposure == 0 {
+            return None;
+        }
+        let mut acc = 0u64;
+        Some(
+            self.occluders
+                .iter()
+                .map(|&c| {
+                    let v = 1.0 - acc as f64 / self.exposure as f64;
+                    acc += c;
+                    v.max(0.0)
+                })
+                .collect(),
+        )
+    }
+}
+
+/// Everything kept of one weather's recordings.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WeatherAcc {
+    /// Per MOR bin index: recordings and *no change* count per cell.
+    pub bins: BTreeMap<i64, (u32, Vec<u32>)>,
+    /// Survival histogram.
+    pub survival: SurvivalHistogram,
+    /// Ghost returns.
+    pub ghost: NoiseAcc,
+    /// Ring returns.
+    pub ring: NoiseAcc,
+    /// One row per recording (any order until [`WeatherAcc::finish`]).
+    pub rows: Vec<RecordingRow>,
+}
+
+/// What adding a recording needs from the reference, precomputed once.
+#[derive(Debug, Clone)]
+pub struct CellTable {
+    cells: Vec<u32>,
+    class: Vec<u16>,
+    ln_r: Vec<f64>,
+    hits: Vec<u16>,
+    n_cells: usize,
+    /// Rays per recording: cells × revolutions (median expected hits).
+    rays: u64,
+}
+
+impl CellTable {
+    /// Class and `ln r` of every reference cell.
+    pub fn new(reference: &ClearReference, partition: &Partition) -> Self {
+        let cells = reference.present().to_vec();
+        CellTable {
+            class: cells
+                .iter()
+                .map(|&c| partition.class_of(reference.reflectivity(c as usize) as f64) as u16)
+                .collect(),
+            ln_r: cells
+                .iter()
+                .map(|&c| (reference.range(c as usize) as f64).ln())
+                .collect(),
+            hits: cells.iter().map(|&c| reference.hits(c as usize)).collect(),
+            rays: reference.grid().cells() as u64 * reference.revolutions() as u64,
+            cells,
+            n_cells: reference.grid().cells(),
+        }
+    }
+}
+
+impl WeatherAcc {
+    /// An empty accumulator.
+    pub fn new(params: &FitValidParams, partition: &Partition) -> Self {
+        WeatherAcc {
+            bins: BTreeMap::new(),
+            survival: SurvivalHistogram::new(partition.classes(), params.survival_log_step()),
+            ghost: NoiseAcc::new(params.ghost_range_m(), params.reflectivity_floor()),
+            ring: NoiseAcc::new(params.ring_range_m(), params.reflectivity_floor()),
+            rows: Vec::new(),
+        }
+    }
+
+    /// Adds one degraded recording of MOR `mor` (metres).
+    #[allow(clippy::too_many_arguments)]
+    pub fn add(
+        &mut self,
+        index: usize,
+        id: &str,
+        mor: f64,
+        rain_rate: Option<f64>,
+        tally: &RecordingTally,
+        cells: &CellTable,
+        params: &FitValidParams,
+        range_scale: f64,
+    ) {
+        let bin = (mor / params.mor_bin_width_m()).floor() as i64;
+        let entry = self
+            .bins
+            .entry(bin)
+            .or_insert_with(|| (0, vec![0; cells.n_cells]));
+        entry.0 += 1;
+        let ln_m = (mor * range_scale).ln();
+        let mut kept = 0u64;
+        let mut total = 0u64;
+        let mut hidden = vec![0u16; 0];
+        if !tally.occluded.is_empty() {
+            hidden = vec![0u16; cells.n_cells];
+            for &c in &tally.occluded {
+                hidden[c as usize] = hidden[c as usize].saturating_add(1);
+            }
+        }
+        for (j, &c) in cells.cells.iter().enumerate() {
+            let k = tally.matched[c as usize];
+            entry.1[c as usize] += k as u32;
+            let h = cells.hits[j];
+            // Clear returns hidden behind a ghost or ring return are neither
+            // kept nor lost: they leave the survival trials.
+            let gone = hidden.get(c as usize).copied().unwrap_or(0);
+            let trials = h - gone.min(h - k.min(h));
+            let b = self.survival.bin_of(cells.ln_r[j] - ln_m);
+            self.survival
+                .add(cells.class[j] as usize, b, k as u64, trials as u64);
+            kept += k as u64;
+            total += h as u64;
+        }
+        self.ghost.add(&tally.ghosts, &tally.occluders, cells.rays);
+        self.ring.add(&tally.rings, &tally.occluders, cells.rays);
+        let reach = params.ghost_range_m()[1].max(params.ring_range_m()[1]);
+        let mut occluders = vec![0u32; (reach / ROW_OCCLUDER_STEP_M).ceil().max(1.0) as usize];
+        for &r in &tally.occluders {
+            let k = (r as f64 / ROW_OCCLUDER_STEP_M).floor().max(0.0) as usize;
+            if let Some(o) = occluders.get_mut(k) {
+                *o += 1;
+            }
+        }
+        self.rows.push(RecordingRow {
+            index,
+            id: id.to_string(),
+            mor,
+            rain_rate,
+            kept,
+            total,
+            ghosts: tally.ghosts.len() as u64,
+            rings: tally.rings.len() as u64,
+            scene: tally.scene,
+            far: tally.far,
+            points: tally.points,
+            occluders,
+            rays: cells.rays,
+        });
+    }
+
+    /// Adds another accumulator (integer sums: order does not matter).
+    pub fn merge(&mut self, o: WeatherAcc) {
+        for (k, (n, v)) in o.bins {
+            match self.bins.get_mut(&k) {
+                Some((m, w)) => {
+                    *m += n;
+                    for (a, b) in w.iter_mut().zip(&v) {
+                        *a += b;
+                    }
+                }
+                None => {
+                    self.bins.insert(k, (n, v));
+                }
+            }
+        }
+        self.survival.merge(&o.survival);
+        self.ghost.merge(&o.ghost);
+        self.ring.merge(&o.ring);
+        self.rows.extend(o.rows);
+    }
+
+    /// Sorts the rows by recording index (the deterministic order of every
+    /// float summary).
+    pub fn finish(&mut self) {
+        self.rows.sort_by_key(|r| r.index);
+    }
+}

@@ -1,0 +1,372 @@
+//! The thin I/O driver: streams a campaign's recordings through the
+//! statistical core.
+//!
+//! 1. The clear recordings are read in parallel and reduced to cell images;
+//!    the [`ClearReference`] is built from them and the images dropped.
+//! 2. The degraded recordings are read in parallel by a fixed pool of workers
+//!    (one per rayon thread), each pairing its recordings with the reference
+//!    and adding them to its own per-weather accumulators; the accumulators
+//!    are merged at the end. Memory is one accumulator per worker plus the
+//!    files in flight: it does not grow with the number of recordings beyond
+//!    one row of scalars each.
+//! 3. Every file read is hashed (SHA-256) from the same bytes that are parsed.
+//!
+//! Errors are deterministic: a bad file does not stop the other workers, and
+//! the error reported is the one of the first bad recording in campaign order.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use murk_campaign::Campaign;
+use murk_io::ReadOptions;
+use murk_types::{LidarSpec, PointFormat, WeatherClass};
+use rayon::prelude::*;
+use sha2::{Digest, Sha256};
+
+use crate::accumulate::{CellTable, WeatherAcc};
+use crate::pairing::pair_recording;
+use crate::radar::Detections;
+use crate::reference::{CellGrid, CellImage, CellPoint, ClearReference, cell_points};
+use crate::survival::Partition;
+use crate::{FitError, FitValidParams};
+
+/// One recording as the fit sees it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecordingInput {
+    /// Recording id.
+    pub id: String,
+    /// Weather class after the rules and the review.
+    pub class: WeatherClass,
+    /// MOR, metres, when the visibility sensors gave one.
+    pub mor: Option<f64>,
+    /// Rain rate, mm/h, when known (the rule set's first non-empty gauge).
+    pub rain_rate: Option<f64>,
+    /// Every non-empty reading of the rule set's rain-rate gauges, mm/h: their
+    /// disagreement measures the gauge noise that the rain conversion corrects.
+    pub rain_readings: Vec<f64>,
+    /// The point-cloud file.
+    pub lidar: PathBuf,
+    /// The radar file, when there is one.
+    pub radar: Option<PathBuf>,
+}
+
+/// Everything a fit reads: the campaign's metadata and the selected
+/// recordings (see [`FitInputs::from_campaign`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct FitInputs {
+    /// Campaign folder (input paths are reported relative to it).
+    pub dir: PathBuf,
+    /// Campaign name.
+    pub name: String,
+    /// The LiDAR.
+    pub lidar: LidarSpec,
+    /// Selected recordings, in campaign order.
+    pub recordings: Vec<RecordingInput>,
+    /// Metadata files to hash (campaign.toml, weather.csv, review.csv, rules).
+    pub metadata: Vec<PathBuf>,
+    /// Why a degraded weather has no recording (from the selection).
+    pub absent: BTreeMap<WeatherClass, String>,
+}
+
+impl FitInputs {
+    /// The kept recordings of every class of `campaign` (rules + review).
+    pub fn from_campaign(campaign: &Campaign) -> FitInputs {
+        let selection = campaign.select();
+        let recordings: Vec<RecordingInput> = selection
+            .recordings()
+            .iter()
+            .filter(|r| r.kept())
+            .filter_map(|r| {
+                Some(RecordingInput {
+                    id: r.id().to_string(),
+                    class: r.class()?,
+                    mor: r.mor(),
+                    rain_rate: r.rain_rate(),
+                    rain_readings: campaign
+                        .rules()
+                        .rain_rate()
+                        .iter()
+                        .filter_map(|c| r.value(c).and_then(|v| v.as_f64()))
+                        .filter(|v| v.is_finite())
+                        .collect(),
+                    lidar: r.lidar().path.clone(),
+                    radar: r.radar().map(Path::to_path_buf),
+                })
+            })
+            .collect();
+        let mut absent = BTreeMap::new();
+        for class in WeatherClass::DEGRADED {
+            if recordings.iter().any(|r| r.class == class) {
+                continue;
+            }
+            let reason = match selection.summary().class(class) {
+                None => "the campaign's rules do not define this class".to_string(),
+                Some(s) if s.before_review == 0 => {
+                    "no recording matched this class's rules".to_string()
+                }
+                Some(s) => format!(
+                    "{} recordings matched the rules, the review kept none",
+                    s.before_review
+                ),
+            };
+            absent.insert(class, reason);
+        }
+        let dir = campaign.dir().to_path_buf();
+        let mut metadata = vec![
+            dir.join(murk_campaign::layout::CAMPAIGN_TOML),
+            dir.join(murk_campaign::layout::WEATHER_CSV),
+        ];
+        if let Some(r) = campaign.review_file() {
+            metadata.push(r.to_path_buf());
+        }
+        let origin = campaign.rules().origin();
+        if origin.is_file() {
+            metadata.push(origin.to_path_buf());
+        }
+        FitInputs {
+            dir,
+            name: campaign.name().to_string(),
+            lidar: campaign.lidar().clone(),
+            recordings,
+            metadata,
+            absent,
+        }
+    }
+}
+
+/// Lower-case hex SHA-256 of `bytes`.
+pub fn sha256_hex(bytes: &[u8]) -> String {
+    Sha256::digest(bytes)
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
+}
+
+/// The path of `path` relative to `dir`, `/`-separated.
+pub fn relative(dir: &Path, path: &Path) -> String {
+    let p = path.strip_prefix(dir).unwrap_or(path);
+    p.components()
+        .map(|c| c.as_os_str().to_string_lossy().into_owned())
+        .collect::<Vec<_>>()
+        .join("/")
+}
+
+/// Reads a file for hashing and parsing.
+pub fn read_file(path: &Path) -> Result<Vec<u8>, FitError> {
+    std::fs::read(path).map_err(|e| FitError::File {
+        path: path.to_path_buf(),
+        reason: format!("cannot read: {e}"),
+    })
+}
+
+/// Reads one LiDAR recording: its points placed in the grid and the file's
+/// SHA-256.
+pub fn read_lidar(
+    path: &Path,
+    spec: &LidarSpec,
+    grid: &CellGrid,
+) -> Result<(Vec<CellPoint>, String), FitError> {
+    let opts = ReadOptions {
+        lidar: Some(spec.clone()),
+        intensity_scale: spec.intensity_scale,
+        ..Default::default()
+    };
+    let format = opts.format_of(path)?;
+    let (mut cloud, digest) = if format == PointFormat::Pcap {
+        let cloud = murk_io::read_cloud(path, &opts)?;
+        (cloud, sha256_hex(&read_file(path)?))
+    } else {
+        let bytes = read_file(path)?;
+        let digest = sha256_hex(&bytes);
+        (murk_io::parse_cloud(&bytes, format, path, &opts)?, digest)
+    };
+    cloud.to_calibrated();
+    Ok((cell_points(grid, &cloud, path)?, digest))
+}
+
+/// Reads a radar file (`x,y,z,rcs,velocity` with a header).
+pub fn read_radar(path: &Path) -> Result<(Detections, String), FitError> {
+    let bytes = read_file(path)?;
+    let digest = sha256_hex(&bytes);
+    let err = |line: usize, reason: String| FitError::Radar {
+        path: path.to_path_buf(),
+        line,
+        reason,
+    };
+    let mut rdr = csv::ReaderBuilder::new()
+        .has_headers(true)
+        .trim(csv::Trim::All)
+        .from_reader(bytes.as_slice());
+    let headers = rdr.headers().map_err(|e| err(1, e.to_string()))?.clone();
+    let col = |name: &str| {
+        headers.iter().position(|h| h == name).ok_or_else(|| {
+            err(
+                1,
+                format!("missing column {name:?} (expected x,y,z,rcs,velocity)"),
+            )
+        })
+    };
+    let (ix, iy, iz) = (col("x")?, col("y")?, col("z")?);
+    let mut out = Vec::new();
+    for (k, rec) in rdr.records().enumerate() {
+        let line = k + 2;
+        let rec = rec.map_err(|e| err(line, e.to_string()))?;
+        let mut p = [0.0; 3];
+        for (slot, (i, name)) in p.iter_mut().zip([(ix, "x"), (iy, "y"), (iz, "z")]) {
+            let s = rec.get(i).unwrap_or("");
+            let v: f64 = s
+                .parse()
+                .map_err(|_| err(line, format!("column {name}: {s:?} is not a number")))?;
+            if !v.is_finite() {
+                return Err(err(line, format!("column {name}: {s:?} is not finite")));
+            }
+            *slot = v;
+        }
+        out.push(p);
+    }
+    Ok((out, digest))
+}
+
+/// Runs `job` over `0..n` on one worker per rayon thread, each folding into
+/// its own state; returns the states and, when any job failed, the error of
+/// the lowest failing index.
+pub fn worker_pool<S: Send, F, I>(n: usize, init: I, job: F) -> Result<Vec<S>, FitError>
+where
+    I: Fn() -> S + Sync,
+    F: Fn(usize, &mut S) -> Result<(), FitError> + Sync,
+{
+    let next = AtomicUsize::new(0);
+    let first_err: Mutex<Option<(usize, FitError)>> = Mutex::new(None);
+    let workers = rayon::current_num_threads().clamp(1, n.max(1));
+    let states: Vec<S> = (0..workers)
+        .into_par_iter()
+        .map(|_| {
+            let mut s = init();
+            loop {
+                let i = next.fetch_add(1, Ordering::Relaxed);
+                if i >= n {
+                    break;
+                }
+                if let Err(e) = job(i, &mut s) {
+                    let mut g = first_err.lock().unwrap_or_else(|p| p.into_inner());
+                    if g.as_ref().is_none_or(|(j, _)| i < *j) {
+                        *g = Some((i, e));
+                    }
+                }
+            }
+            s
+        })
+        .collect();
+    match first_err.into_inner().unwrap_or_else(|p| p.into_inner()) {
+        Some((_, e)) => Err(e),
+        None => Ok(states),
+    }
+}
+
+/// The clear reference of `recs` (all clear): images in parallel, then the
+/// reference. Returns the digests of the files read.
+pub fn build_reference(
+    inputs: &FitInputs,
+    recs: &[&RecordingInput],
+    grid: &CellGrid,
+    params: &FitValidParams,
+) -> Result<(ClearReference, Vec<(PathBuf, String)>), FitError> {
+    let images: Vec<Result<(CellImage, String), FitError>> = recs
+        .par_iter()
+        .map(|r| {
+            let (points, digest) = read_lidar(&r.lidar, &inputs.lidar, grid)?;
+            Ok((CellImage::from_points(&points, grid.cells()), digest))
+        })
+        .collect();
+    let mut imgs = Vec::with_capacity(images.len());
+    let mut digests = Vec::with_capacity(images.len());
+    for (r, res) in recs.iter().zip(images) {
+        let (img, d) = res?;
+        imgs.push(img);
+        digests.push((r.lidar.clone(), d));
+    }
+    Ok((ClearReference::build(grid.clone(), &imgs, params), digests))
+}
+
+/// The per-weather accumulators of one worker.
+pub struct WorkerState {
+    /// Per degraded weather.
+    pub accs: BTreeMap<WeatherClass, WeatherAcc>,
+    /// `(job index, file digest)`.
+    pub digests: Vec<(usize, String)>,
+}
+
+/// A degraded recording ready for pairing: its input and its MOR.
+#[derive(Debug, Clone)]
+pub struct DegradedJob<'a> {
+    /// The recording.
+    pub input: &'a RecordingInput,
+    /// MOR used (measured, or converted from the rain rate).
+    pub mor: f64,
+}
+
+/// Streams the degraded recordings through pairing into accumulators.
+pub fn accumulate_degraded(
+    inputs: &FitInputs,
+    jobs: &[DegradedJob<'_>],
+    reference: &ClearReference,
+    partition: &Partition,
+    params: &FitValidParams,
+) -> Result<(BTreeMap<WeatherClass, WeatherAcc>, Vec<(PathBuf, String)>), FitError> {
+    let cells = CellTable::new(reference, partition);
+    let grid = reference.grid();
+    let rs = inputs.lidar.range_scale;
+    let states = worker_pool(
+        jobs.len(),
+        || WorkerState {
+            accs: BTreeMap::new(),
+            digests: Vec::new(),
+        },
+        |i, s| {
+            let job = &jobs[i];
+            let (points, digest) = read_lidar(&job.input.lidar, &inputs.lidar, grid)?;
+            let tally = pair_recording(reference, &points, params);
+            s.accs
+                .entry(job.input.class)
+                .or_insert_with(|| WeatherAcc::new(params, partition))
+                .add(
+                    i,
+                    &job.input.id,
+                    job.mor,
+                    job.input.rain_rate,
+                    &tally,
+                    &cells,
+                    params,
+                    rs,
+                );
+            s.digests.push((i, digest));
+            Ok(())
+        },
+    )?;
+    let mut accs: BTreeMap<WeatherClass, WeatherAcc> = BTreeMap::new();
+    let mut digests = Vec::new();
+    for s in states {
+        for (k, a) in s.accs {
+            match accs.get_mut(&k) {
+                Some(m) => m.merge(a),
+                None => {
+                    accs.insert(k, a);
+                }
+            }
+        }
+        digests.extend(s.digests);
+    }
+    for a in accs.values_mut() {
+        a.finish();
+    }
+    digests.sort();
+    Ok((
+        accs,
+        digests
+            .into_iter()
+            .map(|(i, d)| (jobs[i].input.lidar.clone(), d))
+            .collect(),
+    ))
+}
