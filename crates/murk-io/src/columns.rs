@@ -175,11 +175,17 @@ pub(crate) fn ring_id(v: f64) -> Result<u16, String> {
 /// A column whose first value is 10⁵ s or more is an absolute clock (epoch
 /// seconds): `f32` would round it to whole minutes, so it is made relative to
 /// the first point, which is what [`PointCloud::time`] holds. Smaller values
-/// are already relative to the scan and are kept.
-pub(crate) fn time_to_f32(v: &[f64]) -> Vec<f32> {
-    match v.first() {
-        Some(&t0) if t0.abs() >= 1e5 => v.iter().map(|&t| (t - t0) as f32).collect(),
-        _ => v.iter().map(|&t| t as f32).collect(),
+/// are already relative to the scan and are kept. A value that does not fit
+/// in an `f32` is an error for `path` at that point.
+pub(crate) fn time_to_f32(path: &Path, v: &[f64]) -> Result<Vec<f32>, IoError> {
+    let t0 = match v.first() {
+        Some(&t0) if t0.abs() >= 1e5 => t0,
+        _ => 0.0,
+    };
+    let out: Vec<f32> = v.iter().map(|&t| (t - t0) as f32).collect();
+    match first_non_finite(&out) {
+        None => Ok(out),
+        Some(i) => Err(non_finite(path, i, "time", v[i])),
     }
 }
 
@@ -296,7 +302,7 @@ pub(crate) fn decode(
         cloud.time = Some(if f.ty == Scalar::F32 {
             time32
         } else {
-            time_to_f32(&time64)
+            time_to_f32(path, &time64)?
         });
     }
     Ok(cloud)
@@ -318,8 +324,12 @@ mod tests {
     #[test]
     fn absolute_times_are_made_relative_and_small_ones_kept() {
         let abs = [1_700_000_000.25, 1_700_000_000.5];
-        assert_eq!(time_to_f32(&abs), vec![0.0, 0.25]);
-        assert_eq!(time_to_f32(&[0.5, 0.75]), vec![0.5, 0.75]);
+        let p = Path::new("t");
+        assert_eq!(time_to_f32(p, &abs).unwrap(), vec![0.0, 0.25]);
+        assert_eq!(time_to_f32(p, &[0.5, 0.75]).unwrap(), vec![0.5, 0.75]);
+        // Relative to a first value of 1e5 s, 1e300 s does not fit an f32.
+        let e = time_to_f32(p, &[1e5, 1e300]).unwrap_err();
+        assert!(matches!(e, IoError::NonFinite { point: 1, .. }), "{e}");
     }
 
     #[test]

@@ -51,7 +51,7 @@ pub enum IoError {
         reason: String,
     },
     /// A coordinate, intensity or time that is NaN or infinite.
-    #[error("{path}: point {point}: {field} is {value} (not finite)")]
+    #[error("{path}: point {point}: {field} is {value:e} (not a finite 32-bit float)")]
     NonFinite {
         /// The file.
         path: PathBuf,

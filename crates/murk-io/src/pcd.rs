@@ -621,7 +621,7 @@ fn parse_ascii(
         cloud.ring = ring;
     }
     if want.time.is_some() {
-        cloud.time = Some(columns::time_to_f32(&time));
+        cloud.time = Some(columns::time_to_f32(path, &time)?);
     }
     Ok(cloud)
 }

@@ -110,7 +110,7 @@ pub fn parse_parquet(
         if let Some(i) = t.iter().position(|v| !v.is_finite()) {
             return Err(columns::non_finite(source, i, "time", t[i]));
         }
-        cloud.time = Some(columns::time_to_f32(&t));
+        cloud.time = Some(columns::time_to_f32(source, &t)?);
     }
     Ok(cloud)
 }

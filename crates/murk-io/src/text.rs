@@ -183,7 +183,7 @@ pub fn parse_csv(bytes: &[u8], source: &Path, opts: &ReadOptions) -> Result<Poin
         cloud.ring = ring;
     }
     if col[5].is_some() {
-        cloud.time = Some(columns::time_to_f32(&time));
+        cloud.time = Some(columns::time_to_f32(source, &time)?);
     }
     Ok(cloud)
 }

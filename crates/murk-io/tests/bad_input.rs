@@ -463,6 +463,32 @@ fn pcd_ascii_nan_names_the_point() {
     ));
 }
 
+#[test]
+fn pcd_time_beyond_f32_is_refused() {
+    let fields = [
+        ("x", 4, 'F'),
+        ("y", 4, 'F'),
+        ("z", 4, 'F'),
+        ("intensity", 4, 'F'),
+        ("time", 8, 'F'),
+    ];
+    let mut t = pcd_header(&fields, 2, "ascii");
+    t.push_str("1 2 3 4 0.5\n1 2 3 4 1e300\n");
+    let (e, msg) = read_err("a.pcd", t.as_bytes());
+    assert!(
+        matches!(
+            e,
+            IoError::NonFinite {
+                point: 1,
+                field: "time",
+                ..
+            }
+        ),
+        "{msg}"
+    );
+    assert_has(&msg, &["time is 1e300"]);
+}
+
 /// A valid binary_compressed file of 2 points, for the corruption tests.
 fn compressed_pcd() -> (Vec<u8>, usize) {
     let cloud = synthetic(2, false);
