@@ -120,6 +120,46 @@ pub enum InferError {
         reason: String,
     },
 
+    /// A camera calibration file that cannot be used (bad number, missing
+    /// or malformed entry).
+    #[error("{path}:{line}: {reason}")]
+    Calib {
+        /// The calibration file.
+        path: PathBuf,
+        /// 1-based line of the problem (for a missing entry: the last line).
+        line: usize,
+        /// What is wrong.
+        reason: String,
+    },
+
+    /// A depth map value or shape that cannot be used.
+    #[error("{source_name}: pixel (x {x}, y {y}): {reason}")]
+    Depth {
+        /// Where the depth map came from (file path or a description).
+        source_name: String,
+        /// Column of the offending pixel.
+        x: usize,
+        /// Row of the offending pixel.
+        y: usize,
+        /// What is wrong.
+        reason: String,
+    },
+
+    /// The image and depth map disagree in size.
+    #[error(
+        "image is {image_w}x{image_h} but its depth map is {depth_w}x{depth_h}: give a depth map of the image's size"
+    )]
+    SizeMismatch {
+        /// Image width, pixels.
+        image_w: u32,
+        /// Image height, pixels.
+        image_h: u32,
+        /// Depth map width, pixels.
+        depth_w: u32,
+        /// Depth map height, pixels.
+        depth_h: u32,
+    },
+
     /// An output would overwrite one of the inputs.
     #[error("{output}: refusing to overwrite the input {input}; choose another --out")]
     OutputIsInput {

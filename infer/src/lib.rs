@@ -25,6 +25,7 @@
 //! - [`batch`]: [`batch::plan`] maps input files and folders to outputs,
 //!   [`batch::run`] reads, applies and writes them in parallel and returns a
 //!   [`BatchReport`].
+//! - [`camera`]: physics-based rain on camera images (seed 003 §3.1), [`camera::RainParams`] → [`camera::RainRenderer`].
 //!
 //! **Reflectivity bands are calibrated VLP-16 reflectivity**, whatever the
 //! input's [`murk_types::IntensityScale`]: a KITTI return stored as 0.03
@@ -68,6 +69,7 @@
 
 mod applier;
 pub mod batch;
+pub mod camera;
 mod error;
 mod hyperparams;
 mod kernel;

@@ -1,0 +1,329 @@
+//! Dense per-pixel depth maps (metres) for the rain renderer: from memory,
+//! from a 16-bit PNG, or from a LiDAR scan projected with a KITTI
+//! calibration and densified.
+//!
+//! **Densification (nearest-neighbour fill).** Pixels with no measurement
+//! are filled in three passes, all deterministic:
+//! 1. *rows*: a gap of at most [`Densify::max_row_gap_px`] pixels between
+//!    two measured pixels of a row takes the value of the nearer one (ties:
+//!    the smaller depth, so thin foreground objects are not eaten);
+//! 2. *columns*: every remaining hole takes the value of the nearest
+//!    measured pixel in its column (ties: the smaller depth); holes *above*
+//!    the column's highest measurement get [`Densify::above_scan_m`] (a
+//!    scanning LiDAR sees little above its top beam: mostly sky and distant
+//!    façades), holes below its lowest measurement take that lowest value;
+//! 3. columns with no measurement at all copy the nearest column that has
+//!    one (ties: the left one).
+//!
+//! When several LiDAR points land on one pixel the nearest wins (z-buffer).
+
+use std::path::Path;
+
+use murk_types::PointCloud;
+
+use super::calib::KittiCalib;
+use crate::error::InferError;
+
+/// How holes of a sparse depth map are filled (see the module docs).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Densify {
+    /// Longest run of empty pixels in a row that is filled from its row
+    /// neighbours (default 8 px).
+    pub max_row_gap_px: usize,
+    /// Depth given to pixels above a column's highest measurement (default
+    /// 1000 m: far enough that rain attenuation there is the full airlight
+    /// of a heavy shower).
+    pub above_scan_m: f32,
+}
+
+impl Default for Densify {
+    fn default() -> Self {
+        Densify {
+            max_row_gap_px: 8,
+            above_scan_m: 1000.0,
+        }
+    }
+}
+
+/// A dense depth map: one distance along the optical axis per pixel, in
+/// metres, row major. Values are finite and positive, or `+∞` (sky).
+#[derive(Debug, Clone, PartialEq)]
+pub struct DepthMap {
+    width: u32,
+    height: u32,
+    metres: Vec<f32>,
+}
+
+impl DepthMap {
+    /// Wraps row-major depths in metres; `source` names the data in errors.
+    /// Every value must be positive (`+∞` allowed for sky).
+    pub fn from_metres(
+        width: u32,
+        height: u32,
+        metres: Vec<f32>,
+        source: &str,
+    ) -> Result<Self, InferError> {
+        let n = width as usize * height as usize;
+        if metres.len() != n || n == 0 {
+            return Err(InferError::Depth {
+                source_name: source.to_string(),
+                x: 0,
+                y: 0,
+                reason: format!(
+                    "{} values given for a {width}x{height} map (need {n}, at least 1)",
+                    metres.len()
+                ),
+            });
+        }
+        if let Some(i) = metres.iter().position(|d| d.is_nan() || *d <= 0.0) {
+            return Err(InferError::Depth {
+                source_name: source.to_string(),
+                x: i % width as usize,
+                y: i / width as usize,
+                reason: format!(
+                    "depth {} m: depths must be positive (use +inf for sky)",
+                    metres[i]
+                ),
+            });
+        }
+        Ok(DepthMap {
+            width,
+            height,
+            metres,
+        })
+    }
+
+    /// A map with the same depth everywhere.
+    pub fn constant(width: u32, height: u32, metres: f32) -> Result<Self, InferError> {
+        Self::from_metres(
+            width,
+            height,
+            vec![metres; width as usize * height as usize],
+            "constant depth",
+        )
+    }
+
+    /// Reads a 16-bit grayscale PNG whose value × `metres_per_unit` is the
+    /// depth (KITTI's depth benchmark: `1/256`). Zero means "no
+    /// measurement" and is filled as described in the module docs.
+    pub fn from_png16(
+        path: &Path,
+        metres_per_unit: f32,
+        densify: &Densify,
+    ) -> Result<Self, InferError> {
+        let input = |reason: String| InferError::Input {
+            path: path.to_path_buf(),
+            reason,
+        };
+        if !(metres_per_unit.is_finite() && metres_per_unit > 0.0) {
+            return Err(input(format!(
+                "metres per unit {metres_per_unit} must be positive"
+            )));
+        }
+        let img =
+            image::open(path).map_err(|e| input(format!("cannot decode the depth PNG: {e}")))?;
+        let image::DynamicImage::ImageLuma16(gray) = img else {
+            return Err(input(format!(
+                "a depth PNG must be 16-bit grayscale, this one is {:?}",
+                img.color()
+            )));
+        };
+        let (w, h) = gray.dimensions();
+        let sparse: Vec<f32> = gray
+            .as_raw()
+            .iter()
+            .map(|&v| {
+                if v == 0 {
+                    f32::NAN
+                } else {
+                    f32::from(v) * metres_per_unit
+                }
+            })
+            .collect();
+        let metres = fill(sparse, w as usize, h as usize, densify)
+            .ok_or_else(|| input("every pixel is 0 (no depth at all)".to_string()))?;
+        Self::from_metres(w, h, metres, &path.display().to_string())
+    }
+
+    /// Projects a LiDAR scan (sensor frame, metres) into a `width`×`height`
+    /// image with `calib` and densifies it. Points behind the camera or
+    /// outside the image are ignored (they are not part of the image);
+    /// `source` names the scan in errors.
+    pub fn from_lidar(
+        cloud: &PointCloud,
+        calib: &KittiCalib,
+        width: u32,
+        height: u32,
+        densify: &Densify,
+        source: &str,
+    ) -> Result<Self, InferError> {
+        let (w, h) = (width as usize, height as usize);
+        let mut sparse = vec![f32::NAN; w * h];
+        for i in 0..cloud.x.len() {
+            let (x, y, z) = (cloud.x[i], cloud.y[i], cloud.z[i]);
+            if !(x.is_finite() && y.is_finite() && z.is_finite()) {
+                return Err(InferError::BadCloud {
+                    scan: source.to_string(),
+                    reason: format!("point {i}: coordinate is not finite ({x}, {y}, {z})"),
+                });
+            }
+            let Some((u, v, d)) = calib.project(f64::from(x), f64::from(y), f64::from(z)) else {
+                continue;
+            };
+            // Pixel (c, r) covers [c, c+1) × [r, r+1).
+            let (c, r) = (u.floor(), v.floor());
+            if c < 0.0 || r < 0.0 || c >= w as f64 || r >= h as f64 || d < 0.1 {
+                continue;
+            }
+            let k = r as usize * w + c as usize;
+            let d = d as f32;
+            if sparse[k].is_nan() || d < sparse[k] {
+                sparse[k] = d;
+            }
+        }
+        let metres = fill(sparse, w, h, densify).ok_or_else(|| InferError::Depth {
+            source_name: source.to_string(),
+            x: 0,
+            y: 0,
+            reason: format!("no LiDAR point projects into the {width}x{height} image"),
+        })?;
+        Self::from_metres(width, height, metres, source)
+    }
+
+    /// Width in pixels.
+    pub fn width(&self) -> u32 {
+        self.width
+    }
+
+    /// Height in pixels.
+    pub fn height(&self) -> u32 {
+        self.height
+    }
+
+    /// Depth at column `x`, row `y`, metres.
+    pub fn get(&self, x: u32, y: u32) -> f32 {
+        self.metres[y as usize * self.width as usize + x as usize]
+    }
+
+    /// All depths, row major.
+    pub fn as_slice(&self) -> &[f32] {
+        &self.metres
+    }
+}
+
+/// Nearest-neighbour fill of the NaN holes (module docs); `None` when there
+/// is no value at all.
+fn fill(mut m: Vec<f32>, w: usize, h: usize, densify: &Densify) -> Option<Vec<f32>> {
+    let pick = |a: (usize, f32), b: (usize, f32)| -> f32 {
+        // a and b are (distance, depth); nearer wins, ties to the smaller depth.
+        if a.0 < b.0 || (a.0 == b.0 && a.1 <= b.1) {
+            a.1
+        } else {
+            b.1
+        }
+    };
+    // 1. short gaps in rows.
+    for row in m.chunks_mut(w) {
+        let mut prev: Option<usize> = None;
+        for x in 0..w {
+            if row[x].is_nan() {
+                continue;
+            }
+            if let Some(p) = prev
+                && x - p > 1
+                && x - p - 1 <= densify.max_row_gap_px
+            {
+                let (dl, dr) = (row[p], row[x]);
+                for (k, cell) in row.iter_mut().enumerate().take(x).skip(p + 1) {
+                    *cell = pick((k - p, dl), (x - k, dr));
+                }
+            }
+            prev = Some(x);
+        }
+    }
+    // 2. columns.
+    let mut has = vec![false; w];
+    let mut col = vec![0f32; h];
+    for (x, has_x) in has.iter_mut().enumerate() {
+        let samples: Vec<usize> = (0..h).filter(|&y| !m[y * w + x].is_nan()).collect();
+        let (Some(&top), Some(&bottom)) = (samples.first(), samples.last()) else {
+            continue;
+        };
+        *has_x = true;
+        for (y, c) in col.iter_mut().enumerate() {
+            *c = m[y * w + x];
+        }
+        for c in col.iter_mut().take(top) {
+            *c = densify.above_scan_m;
+        }
+        let bottom_v = col[bottom];
+        for c in col.iter_mut().skip(bottom + 1) {
+            *c = bottom_v;
+        }
+        for pair in samples.windows(2) {
+            let (a, b) = (pair[0], pair[1]);
+            let (da, db) = (col[a], col[b]);
+            for (y, c) in col.iter_mut().enumerate().take(b).skip(a + 1) {
+                *c = pick((y - a, da), (b - y, db));
+            }
+        }
+        for (y, c) in col.iter().enumerate() {
+            m[y * w + x] = *c;
+        }
+    }
+    // 3. empty columns copy the nearest filled column.
+    let filled: Vec<usize> = (0..w).filter(|&x| has[x]).collect();
+    if filled.is_empty() {
+        return None;
+    }
+    for x in 0..w {
+        if has[x] {
+            continue;
+        }
+        let src = *filled
+            .iter()
+            .min_by_key(|&&c| (c.abs_diff(x), c))
+            .expect("non-empty");
+        for y in 0..h {
+            m[y * w + x] = m[y * w + src];
+        }
+    }
+    Some(m)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fill_takes_nearest_and_sky_above() {
+        let n = f32::NAN;
+        // 3 columns × 5 rows; only column 1 has samples at rows 2 and 4.
+        #[rustfmt::skip]
+        let m = vec![
+            n, n, n,
+            n, n, n,
+            n, 4.0, n,
+            n, n, n,
+            n, 8.0, n,
+        ];
+        let d = Densify {
+            max_row_gap_px: 0,
+            above_scan_m: 500.0,
+        };
+        let f = fill(m, 3, 5, &d).unwrap();
+        let col1: Vec<f32> = (0..5).map(|y| f[y * 3 + 1]).collect();
+        // Row 3 is equidistant from 4 and 8: tie goes to the nearer object.
+        assert_eq!(col1, vec![500.0, 500.0, 4.0, 4.0, 8.0]);
+        // Empty columns copy column 1.
+        for y in 0..5 {
+            assert_eq!(f[y * 3], f[y * 3 + 1]);
+            assert_eq!(f[y * 3 + 2], f[y * 3 + 1]);
+        }
+    }
+
+    #[test]
+    fn fill_of_nothing_is_none() {
+        assert!(fill(vec![f32::NAN; 6], 3, 2, &Densify::default()).is_none());
+    }
+}
