@@ -32,6 +32,8 @@ enum Command {
     Generate(cmd::generate::Args),
     /// Fit the weather noise models of a campaign into a coefficient table.
     Fit(cmd::fit::Args),
+    /// Apply a fitted weather model to clear-weather point clouds.
+    Apply(cmd::apply::Args),
 }
 
 fn main() {
@@ -41,6 +43,7 @@ fn main() {
         Command::Campaign(a) => cmd::campaign::run(a),
         Command::Generate(a) => cmd::generate::run(a),
         Command::Fit(a) => cmd::fit::run(a),
+        Command::Apply(a) => cmd::apply::run(a),
     };
     if let Err(e) = result {
         eprintln!("murk: error: {e:#}");

@@ -11,6 +11,8 @@
 //! Figures so far:
 //! - [`mor_histogram`]: the MOR of the recordings of each weather class, one
 //!   panel per class on a shared axis (the seed report's Figure 24).
+//! - [`range_vs_mor`], [`slope_vs_reflectivity`], [`gaussian_histograms`]:
+//!   the figures of a fit (the seed's Figures 26, 27 and 29).
 //!
 //! ```
 //! use murk_figures::{FigureOptions, mor_histogram};
@@ -28,10 +30,15 @@
 //! ```
 
 mod error;
+mod fit;
 mod histogram;
 mod output;
 
 pub use error::FigureError;
+pub use fit::{
+    GaussianPanel, QuantileMarker, RangeMorFigure, SlopeLine, SweepSeries, gaussian_histograms,
+    range_vs_mor, slope_vs_reflectivity,
+};
 pub use histogram::{Bins, mor_histogram, shared_bins, write_mor_histograms};
 pub use output::ImageFormat;
 

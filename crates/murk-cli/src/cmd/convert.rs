@@ -1,10 +1,263 @@
-//! `murk convert` (placeholder until its library lands).
+//! `murk convert`: point clouds from one format to another.
+//!
+//! ```text
+//! murk convert INPUT... --out DIR --format pcd|bin|nuscenes|csv|parquet
+//!              [--pcd-data ascii|binary|binary_compressed]
+//!              [--intensity-scale NAME] [--input-intensity-scale NAME]
+//! ```
+//!
+//! - An INPUT is a file or a folder; folders are walked recursively and every
+//!   file with a point-cloud extension (`.pcd .bin .pcd.bin .csv .parquet
+//!   .pcap`) is taken, in sorted order. A file given by name must have one.
+//! - Output names keep the input's stem: `DIR/<stem>.<ext>`; files found in
+//!   a folder keep their path relative to that folder
+//!   (`DIR/<sub>/<stem>.<ext>`), so equal stems in different subfolders do
+//!   not collide.
+//! - A `.pcap` always becomes a folder of frames, one per revolution:
+//!   `DIR/<stem>/frame-000001.<ext>`, `frame-000002.<ext>`, … (numbered from
+//!   1), whether one capture or many are converted.
+//! - Intensity is written as read unless `--intensity-scale` names the scale
+//!   to write it in (e.g. `calibrated` to turn KITTI's 0–1 into 0–255);
+//!   `--input-intensity-scale` overrides the scale the inputs are taken to
+//!   be in (default: the format's, see `murk_types::IntensityScale`).
+//! - Nothing is written when two inputs would land on the same output or an
+//!   output would overwrite an input. Every file is written atomically.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
+use murk_io::{PcdData, ReadOptions, WriteOptions, read_frames, write_cloud_with};
+use murk_types::{IntensityScale, PointFormat};
 
 /// Arguments of `murk convert`.
 #[derive(clap::Args, Debug)]
-pub struct Args {}
+pub struct Args {
+    /// Files or folders to convert (folders are searched recursively).
+    #[arg(required = true)]
+    pub inputs: Vec<PathBuf>,
+    /// Output folder (created when missing).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Output format: pcd, bin (KITTI), nuscenes (.pcd.bin), csv or parquet.
+    #[arg(long, value_parser = parse_writable_format)]
+    pub format: PointFormat,
+    /// PCD data encoding: ascii, binary or binary_compressed.
+    #[arg(long, default_value = "binary")]
+    pub pcd_data: PcdData,
+    /// Scale to write intensity in (calibrated, kitti, six-bit, …); default:
+    /// the values as read, unconverted.
+    #[arg(long)]
+    pub intensity_scale: Option<IntensityScale>,
+    /// Scale the inputs' intensity is in; default: each format's own.
+    #[arg(long)]
+    pub input_intensity_scale: Option<IntensityScale>,
+}
+
+fn parse_writable_format(s: &str) -> Result<PointFormat, String> {
+    match PointFormat::from_name(s) {
+        Ok(f) if f.writable() => Ok(f),
+        _ => Err(format!(
+            "{s:?} is not a format murk writes: expected pcd, bin, nuscenes, csv or parquet"
+        )),
+    }
+}
+
+/// One input file and where its output goes.
+#[derive(Debug)]
+struct Job {
+    input: PathBuf,
+    /// Output path relative to `--out`, without extension (a pcap: the
+    /// folder of its frames).
+    stem: PathBuf,
+    is_pcap: bool,
+}
+
+/// `stem` with `.ext` appended (not `with_extension`, which would eat a dot
+/// inside the stem: `scan.v2` + `csv` must give `scan.v2.csv`).
+fn with_ext(stem: &Path, ext: &str) -> PathBuf {
+    let mut name = stem.file_name().unwrap_or_default().to_os_string();
+    name.push(".");
+    name.push(ext);
+    stem.with_file_name(name)
+}
+
+/// The file name of `path` without its point-cloud extension.
+fn stem_of(path: &Path) -> anyhow::Result<String> {
+    let name = path
+        .file_name()
+        .and_then(|n| n.to_str())
+        .with_context(|| format!("{}: file name is not UTF-8", path.display()))?;
+    let format = PointFormat::from_path(path)?;
+    // `.pcd.bin` is two extensions; the others one (any letter case).
+    let ext_len = format.extension().len() + 1;
+    Ok(name[..name.len() - ext_len].to_string())
+}
+
+/// Every point-cloud file under `dir`, sorted, as paths relative to `dir`.
+fn walk(dir: &Path, rel: &Path, out: &mut Vec<PathBuf>) -> anyhow::Result<()> {
+    let here = dir.join(rel);
+    let mut entries: Vec<_> = std::fs::read_dir(&here)
+        .with_context(|| format!("{}: cannot list folder", here.display()))?
+        .map(|e| e.map(|e| e.path()))
+        .collect::<Result<_, _>>()
+        .with_context(|| format!("{}: cannot list folder", here.display()))?;
+    entries.sort();
+    for p in entries {
+        let name = p.file_name().map(PathBuf::from).unwrap_or_default();
+        if p.is_dir() {
+            walk(dir, &rel.join(&name), out)?;
+        } else if PointFormat::from_path(&p).is_ok() {
+            out.push(rel.join(&name));
+        }
+    }
+    Ok(())
+}
+
+/// The inputs to convert and their output stems, in order.
+fn plan(inputs: &[PathBuf]) -> anyhow::Result<Vec<Job>> {
+    let mut jobs = Vec::new();
+    let mut seen = BTreeSet::new();
+    for input in inputs {
+        let mut found = Vec::new();
+        let base: &Path;
+        if input.is_dir() {
+            walk(input, Path::new(""), &mut found)?;
+            base = input;
+        } else if input.is_file() {
+            PointFormat::from_path(input)?;
+            found.push(PathBuf::from(input.file_name().unwrap_or_default()));
+            base = input.parent().unwrap_or(Path::new(""));
+        } else {
+            bail!("{}: no such file or folder", input.display());
+        }
+        for rel in found {
+            let path = base.join(&rel);
+            let key = std::fs::canonicalize(&path)
+                .with_context(|| format!("{}: cannot resolve", path.display()))?;
+            if !seen.insert(key) {
+                continue; // the same file reached twice (folder and file, or twice listed)
+            }
+            let stem = rel.with_file_name(stem_of(&path)?);
+            let is_pcap = PointFormat::from_path(&path)? == PointFormat::Pcap;
+            jobs.push(Job {
+                input: path,
+                stem,
+                is_pcap,
+            });
+        }
+    }
+    Ok(jobs)
+}
 
 /// Runs `murk convert`.
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("murk convert is not implemented yet")
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let jobs = plan(&args.inputs)?;
+    if jobs.is_empty() {
+        bail!("no point-cloud file found in the inputs");
+    }
+    let ext = args.format.extension();
+    // Refuse collisions and overwriting an input before writing anything.
+    let inputs: BTreeSet<PathBuf> = jobs
+        .iter()
+        .map(|j| std::fs::canonicalize(&j.input))
+        .collect::<Result<_, _>>()?;
+    let mut claimed: BTreeMap<PathBuf, &Path> = BTreeMap::new();
+    for j in &jobs {
+        if j.is_pcap {
+            continue; // frames go into their own folder, checked when written
+        }
+        let out = args.out.join(with_ext(&j.stem, ext));
+        if let Some(prev) = claimed.insert(out.clone(), &j.input) {
+            bail!(
+                "{} and {} would both be written to {}",
+                prev.display(),
+                j.input.display(),
+                out.display()
+            );
+        }
+    }
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("{}: cannot create output folder", args.out.display()))?;
+    let refuse_input = |out: &Path| -> anyhow::Result<()> {
+        if let (Some(dir), Some(name)) = (out.parent(), out.file_name())
+            && let Ok(dir) = std::fs::canonicalize(dir)
+            && inputs.contains(&dir.join(name))
+        {
+            bail!("{}: refusing to overwrite an input file", out.display());
+        }
+        Ok(())
+    };
+    for j in &jobs {
+        if !j.is_pcap {
+            refuse_input(&args.out.join(with_ext(&j.stem, ext)))?;
+        }
+    }
+
+    let read_opts = ReadOptions {
+        intensity_scale: args.input_intensity_scale,
+        ..ReadOptions::default()
+    };
+    let write_opts = WriteOptions {
+        format: args.format,
+        pcd_data: args.pcd_data,
+    };
+    let (mut files, mut points) = (0usize, 0usize);
+    for j in &jobs {
+        let frames = read_frames(&j.input, &read_opts)?;
+        let outputs: Vec<PathBuf> = if j.is_pcap {
+            let dir = args.out.join(&j.stem);
+            std::fs::create_dir_all(&dir)
+                .with_context(|| format!("{}: cannot create folder", dir.display()))?;
+            (1..=frames.len())
+                .map(|k| dir.join(format!("frame-{k:06}.{ext}")))
+                .collect()
+        } else {
+            let out = args.out.join(with_ext(&j.stem, ext));
+            if let Some(dir) = out.parent() {
+                std::fs::create_dir_all(dir)
+                    .with_context(|| format!("{}: cannot create folder", dir.display()))?;
+            }
+            vec![out]
+        };
+        let mut n = 0;
+        for (mut cloud, out) in frames.into_iter().zip(&outputs) {
+            refuse_input(out)?;
+            if let Some(scale) = args.intensity_scale {
+                cloud.to_scale(scale);
+            }
+            write_cloud_with(out, &cloud, &write_opts)?;
+            n += cloud.len();
+        }
+        println!(
+            "{} -> {} ({} point{}{})",
+            j.input.display(),
+            if j.is_pcap {
+                format!(
+                    "{} ({} frames)",
+                    args.out.join(&j.stem).display(),
+                    outputs.len()
+                )
+            } else {
+                outputs[0].display().to_string()
+            },
+            n,
+            if n == 1 { "" } else { "s" },
+            match args.intensity_scale {
+                Some(s) => format!(", intensity as {s}"),
+                None => String::new(),
+            }
+        );
+        files += outputs.len();
+        points += n;
+    }
+    println!(
+        "converted {} input{} into {files} {} file{} ({points} points) in {}",
+        jobs.len(),
+        if jobs.len() == 1 { "" } else { "s" },
+        ext,
+        if files == 1 { "" } else { "s" },
+        args.out.display()
+    );
+    Ok(())
 }

@@ -1,10 +1,276 @@
-//! `murk fit` (placeholder until its library lands).
+//! `murk fit CAMPAIGN --out T.json [--figures DIR]`: fits the coefficient
+//! table of a campaign, prints a summary and optionally draws the figures.
+//!
+//! Glue only: flags → [`murk_fit::FitParams`] → [`murk_fit::FitValidParams::fit`]
+//! → table file, summary and figure data.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context as _;
+use murk_campaign::Campaign;
+use murk_figures::{
+    FigureOptions, GaussianPanel, QuantileMarker, RangeMorFigure, SlopeLine, SweepSeries,
+    gaussian_histograms, mor_histogram, range_vs_mor, slope_vs_reflectivity,
+};
+use murk_fit::{EdgeShape, FitParams, FittedTable, NoiseHistograms};
+use murk_types::NoiseLaw;
 
 /// Arguments of `murk fit`.
 #[derive(clap::Args, Debug)]
-pub struct Args {}
+pub struct Args {
+    /// The campaign folder.
+    pub campaign: PathBuf,
+    /// Where to write the coefficient table (JSON, written atomically).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Folder for the figures (PNG and SVG); created when missing.
+    #[arg(long)]
+    pub figures: Option<PathBuf>,
+    /// Quantile of the seed's estimator.
+    #[arg(long, default_value_t = 0.99)]
+    pub quantile: f64,
+    /// MOR bin width of the quantile estimator, metres.
+    #[arg(long, default_value_t = 10.0)]
+    pub mor_bin_width: f64,
+    /// Reflectivity band edges of the table, comma separated (last band unbounded).
+    #[arg(long, value_delimiter = ',', default_value = "0,10")]
+    pub bands: Vec<f64>,
+    /// Reflectivity band edges of the slope-vs-reflectivity sweep.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "0,5,10,15,20,30,40,60,100"
+    )]
+    pub sweep: Vec<f64>,
+    /// Ghost window `lo,hi`, metres.
+    #[arg(long, value_delimiter = ',', num_args = 2, default_values_t = [3.0, 10.0])]
+    pub ghost_range: Vec<f64>,
+    /// Ring window `lo,hi`, metres.
+    #[arg(long, value_delimiter = ',', num_args = 2, default_values_t = [0.0, 3.0])]
+    pub ring_range: Vec<f64>,
+    /// Absolute pairing tolerance, metres.
+    #[arg(long, default_value_t = 0.5)]
+    pub pairing_tolerance: f64,
+    /// Relative pairing tolerance.
+    #[arg(long, default_value_t = 0.02)]
+    pub pairing_tolerance_rel: f64,
+    /// No-change returns a MOR bin needs.
+    #[arg(long, default_value_t = 50)]
+    pub min_points_per_bin: u64,
+    /// Censoring share of clear returns beyond the quantile.
+    #[arg(long, default_value_t = 0.02)]
+    pub censor_fraction: f64,
+    /// Shape of the soft survival edge: probit or logistic.
+    #[arg(long, default_value = "probit")]
+    pub edge: String,
+    /// Fit one edge width per band instead of a shared one.
+    #[arg(long)]
+    pub per_band_width: bool,
+    /// Fix the dropout to the clear-weather value instead of fitting it.
+    #[arg(long)]
+    pub fixed_dropout: bool,
+    /// Bootstrap replicates for rate uncertainties.
+    #[arg(long, default_value_t = 1000)]
+    pub bootstrap: u32,
+    /// Seed of the bootstrap.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Radar pairing distance, metres.
+    #[arg(long, default_value_t = 0.5)]
+    pub radar_tolerance: f64,
+}
 
 /// Runs `murk fit`.
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("murk fit is not implemented yet")
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let params = FitParams::default()
+        .quantile(args.quantile)
+        .mor_bin_width_m(args.mor_bin_width)
+        .band_edges(args.bands.clone())
+        .sweep_edges(args.sweep.clone())
+        .ghost_range_m([args.ghost_range[0], args.ghost_range[1]])
+        .ring_range_m([args.ring_range[0], args.ring_range[1]])
+        .pairing_tolerance_m(args.pairing_tolerance)
+        .pairing_tolerance_rel(args.pairing_tolerance_rel)
+        .min_points_per_bin(args.min_points_per_bin)
+        .censor_fraction(args.censor_fraction)
+        .edge(args.edge.parse::<EdgeShape>()?)
+        .shared_edge_width(!args.per_band_width)
+        .free_dropout(!args.fixed_dropout)
+        .bootstrap_replicates(args.bootstrap)
+        .seed(args.seed)
+        .radar_tolerance_m(args.radar_tolerance)
+        .check()?;
+    let campaign = Campaign::open(&args.campaign)?;
+    let fitted = params.fit(&campaign)?;
+    fitted.write(&args.out)?;
+    print!("{}", fitted.summary());
+    println!("table written to {}", args.out.display());
+    if let Some(dir) = &args.figures {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("{}: cannot create the figure folder", dir.display()))?;
+        let written = figures(&fitted, dir)?;
+        println!("{} figures written to {}", written, dir.display());
+    }
+    Ok(())
+}
+
+fn band_label(min: f64, max: Option<f64>) -> String {
+    match max {
+        Some(m) => format!("[{min}, {m})"),
+        None => format!("[{min}, ∞)"),
+    }
+}
+
+/// Draws every figure of a fit into `dir` (PNG and SVG); returns how many
+/// files were written.
+fn figures(fitted: &FittedTable, dir: &Path) -> anyhow::Result<usize> {
+    let t = fitted.table();
+    let diag = fitted.diagnostics();
+    let rs = t.lidar.range_scale;
+    let opts = FigureOptions::default();
+    let mut n = 0;
+
+    // Figure 24: MOR histograms.
+    let mut series: Vec<(&str, &[f64])> = Vec::new();
+    for (w, d) in &diag.weathers {
+        series.push((w.name(), &d.mor));
+    }
+    if !series.is_empty() {
+        for ext in ["png", "svg"] {
+            mor_histogram(&series, &opts, &dir.join(format!("mor-histogram.{ext}")))?;
+            n += 1;
+        }
+    }
+
+    let mut sweep = Vec::new();
+    for (w, c) in &t.weathers {
+        let Some(d) = diag.weathers.get(w) else {
+            continue;
+        };
+        // Figure 26: range vs MOR with quantiles and lines.
+        let quantiles: Vec<QuantileMarker> = c
+            .mor_bins
+            .iter()
+            .filter_map(|b| {
+                Some(QuantileMarker {
+                    mor: b.mor_m,
+                    range: b.q99_range_m?,
+                    used: b.used,
+                })
+            })
+            .collect();
+        let mut lines = Vec::new();
+        for b in &c.vanishing_slope {
+            if let Some(s) = b.slope {
+                lines.push(SlopeLine {
+                    label: format!(
+                        "ML {} = {s:.4}",
+                        band_label(b.reflectivity_min, b.reflectivity_max)
+                    ),
+                    slope: s * rs,
+                    seed: false,
+                });
+            }
+        }
+        if let Some(s) = d.q99_all_slope {
+            lines.push(SlopeLine {
+                label: format!("seed q{} (all) = {s:.4}", (c.quantile * 100.0).round()),
+                slope: s * rs,
+                seed: true,
+            });
+        }
+        let fig = RangeMorFigure {
+            weather: w.name(),
+            mor: &d.density.mor,
+            mor_bin_width: d.density.mor_bin_width_m,
+            range_step: d.density.range_step_m,
+            kept: &d.density.kept,
+            lost: &d.density.lost,
+            quantiles: &quantiles,
+            lines: &lines,
+        };
+        for ext in ["png", "svg"] {
+            range_vs_mor(&fig, &opts, &dir.join(format!("range-vs-mor-{w}.{ext}")))?;
+            n += 1;
+        }
+
+        // Figure 27 series.
+        let centre = |b: &murk_types::SweepBand| {
+            b.reflectivity_max.map_or(b.reflectivity_min * 1.25, |m| {
+                0.5 * (b.reflectivity_min + m)
+            })
+        };
+        let ml: Vec<(f64, f64)> = c
+            .reflectivity_sweep
+            .iter()
+            .filter_map(|b| Some((centre(b), b.slope?)))
+            .collect();
+        let q: Vec<(f64, f64)> = c
+            .reflectivity_sweep
+            .iter()
+            .filter_map(|b| Some((centre(b), b.slope_q99?)))
+            .collect();
+        sweep.push(SweepSeries {
+            label: format!("{w} ML"),
+            points: ml,
+            seed: false,
+        });
+        sweep.push(SweepSeries {
+            label: format!("{w} q{}", (c.quantile * 100.0).round()),
+            points: q,
+            seed: true,
+        });
+
+        // Figure 29: ghost and ring histograms with their laws.
+        let mut panels = Vec::new();
+        for (name, law, hist) in [("ghost", &c.ghost, &d.ghost), ("ring", &c.ring, &d.ring)] {
+            if let Some(h) = hist {
+                panels.extend(noise_panels(name, law.as_ref(), h));
+            }
+        }
+        if !panels.is_empty() {
+            let o = FigureOptions {
+                title: Some(format!("{w}: ghost and ring returns")),
+                ..FigureOptions::default()
+            };
+            for ext in ["png", "svg"] {
+                gaussian_histograms(&panels, &o, &dir.join(format!("noise-{w}.{ext}")))?;
+                n += 1;
+            }
+        }
+    }
+    if !sweep.is_empty() {
+        for ext in ["png", "svg"] {
+            slope_vs_reflectivity(
+                &sweep,
+                &opts,
+                &dir.join(format!("slope-vs-reflectivity.{ext}")),
+            )?;
+            n += 1;
+        }
+    }
+    Ok(n)
+}
+
+fn noise_panels(name: &str, law: Option<&NoiseLaw>, h: &NoiseHistograms) -> [GaussianPanel; 2] {
+    [
+        GaussianPanel {
+            title: format!("{name} distance (m)"),
+            lo: h.distance.lo,
+            step: h.distance.step,
+            counts: h.distance.counts.clone(),
+            law: law.map(|l| (l.distance_m.mean, l.distance_m.std)),
+            truncation: law.map_or((None, None), |l| (l.distance_m.lower, l.distance_m.upper)),
+        },
+        GaussianPanel {
+            title: format!("{name} reflectivity"),
+            lo: h.reflectivity.lo,
+            step: h.reflectivity.step,
+            counts: h.reflectivity.counts.clone(),
+            law: law.map(|l| (l.reflectivity.mean, l.reflectivity.std)),
+            truncation: law.map_or((None, None), |l| {
+                (l.reflectivity.lower, l.reflectivity.upper)
+            }),
+        },
+    ]
 }

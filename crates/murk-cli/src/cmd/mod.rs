@@ -1,5 +1,6 @@
 //! One module per subcommand: clap arguments and a `run` that calls the libraries.
 
+pub mod apply;
 pub mod campaign;
 pub mod convert;
 pub mod fit;

@@ -1,0 +1,280 @@
+//! `murk apply`: degrade clear-weather point clouds with a fitted model.
+//!
+//! ```text
+//! murk apply --coefficients T.json --weather fog --mor 60 INPUTS... --out DIR
+//!            [--rain-rate R [--clamp]] [--format F] [--pcd-data D]
+//!            [--near-range [--near-range-count-scale S]] [--range-noise SIGMA]
+//!            [--attenuate-intensity] [--soft-edge] [--slope survival|quantile]
+//!            [--seed N] [--range-scale K] [--intensity-scale NAME]
+//!            [--campaign DIR] [--clear-mor-threshold M] [--summary FILE]
+//! ```
+//!
+//! Glue only: flags → [`murk_infer::ApplyParams`] → [`murk_infer::batch`].
+//! INPUTS are files or folders (walked recursively; files that are not point
+//! clouds are listed, not read); outputs keep their names below `--out`, in
+//! the input's format or `--format`. Nothing is written when an output would
+//! overwrite an input.
+
+use std::io::IsTerminal as _;
+use std::path::PathBuf;
+
+use anyhow::{Context, bail};
+use indicatif::{ProgressBar, ProgressStyle};
+use murk_infer::batch;
+use murk_infer::{ApplyParams, ApplySummary, BatchOptions, Severity, SlopeSource};
+use murk_io::{PcdData, ReadOptions};
+use murk_types::{IntensityScale, PointFormat, WeatherClass};
+
+/// Arguments of `murk apply`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Coefficient table written by `murk fit`.
+    #[arg(long)]
+    pub coefficients: PathBuf,
+    /// Weather to apply: fog, rain or snow.
+    #[arg(long)]
+    pub weather: WeatherClass,
+    /// Meteorological optical range, metres.
+    #[arg(
+        long,
+        required_unless_present = "rain_rate",
+        conflicts_with = "rain_rate"
+    )]
+    pub mor: Option<f64>,
+    /// Rain rate, mm/h (rain only), converted with the table's rate → MOR fit.
+    #[arg(long)]
+    pub rain_rate: Option<f64>,
+    /// Clamp a rain rate outside the conversion's validity into it (warned)
+    /// instead of failing.
+    #[arg(long, requires = "rain_rate")]
+    pub clamp: bool,
+    /// Files or folders of clear-weather scans.
+    #[arg(required = true)]
+    pub inputs: Vec<PathBuf>,
+    /// Output folder (created when missing).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Output format (pcd, bin, nuscenes, csv, parquet); default: each input's.
+    #[arg(long, value_parser = parse_writable_format)]
+    pub format: Option<PointFormat>,
+    /// PCD data encoding of PCD outputs: ascii, binary or binary_compressed.
+    #[arg(long, default_value = "binary")]
+    pub pcd_data: PcdData,
+    /// Add ghost and ring returns from the table's laws.
+    #[arg(long)]
+    pub near_range: bool,
+    /// Multiply the table's ghost/ring count per scan (its counts are per
+    /// recording; one revolution of a 1-minute recording is ~1/600).
+    #[arg(long, default_value_t = 1.0, requires = "near_range")]
+    pub near_range_count_scale: f64,
+    /// σ (metres) of Gaussian range noise on kept returns.
+    #[arg(long, value_name = "SIGMA")]
+    pub range_noise: Option<f64>,
+    /// Attenuate kept intensities by exp(−2·α·r), α = ln(20)/MOR.
+    #[arg(long)]
+    pub attenuate_intensity: bool,
+    /// Stochastic survival edge from the table's survival fit.
+    #[arg(long)]
+    pub soft_edge: bool,
+    /// Slope estimate: survival (the table's vanishing_slope) or quantile
+    /// (vanishing_slope_q99, the seed's method).
+    #[arg(long, default_value = "survival", value_parser = parse_slope)]
+    pub slope: SlopeSource,
+    /// Master seed of every random draw.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Range-scale coefficient of the target sensor; default: the table's.
+    #[arg(long)]
+    pub range_scale: Option<f64>,
+    /// Scale the inputs' intensity is in (calibrated, kitti, six-bit, …);
+    /// default: each format's own.
+    #[arg(long)]
+    pub intensity_scale: Option<IntensityScale>,
+    /// A campaign folder whose `[lidar]` describes the input sensor (ring
+    /// elevations for ring derivation and near-range rays, azimuth grid).
+    #[arg(long)]
+    pub campaign: Option<PathBuf>,
+    /// MOR (m) at and above which applying is the identity; default: the
+    /// table's, else 2000.
+    #[arg(long)]
+    pub clear_mor_threshold: Option<f64>,
+    /// Also write the JSON report (murk-apply-summary/1) here.
+    #[arg(long)]
+    pub summary: Option<PathBuf>,
+}
+
+fn parse_writable_format(s: &str) -> Result<PointFormat, String> {
+    match PointFormat::from_name(s) {
+        Ok(f) if f.writable() => Ok(f),
+        _ => Err(format!(
+            "{s:?} is not a format murk writes: expected pcd, bin, nuscenes, csv or parquet"
+        )),
+    }
+}
+
+fn parse_slope(s: &str) -> Result<SlopeSource, String> {
+    match s {
+        "survival" => Ok(SlopeSource::Survival),
+        "quantile" | "q99" => Ok(SlopeSource::Quantile),
+        _ => Err(format!("{s:?}: expected survival or quantile")),
+    }
+}
+
+/// Runs `murk apply`.
+pub fn run(a: Args) -> anyhow::Result<()> {
+    let severity = match (a.mor, a.rain_rate) {
+        (Some(m), None) => Severity::Mor(m),
+        (None, Some(r)) => Severity::RainRate(r),
+        _ => bail!("give exactly one of --mor and --rain-rate"),
+    };
+    let lidar = match &a.campaign {
+        Some(dir) => Some(
+            murk_campaign::Campaign::open(dir)
+                .with_context(|| format!("reading the sensor description of {}", dir.display()))?
+                .lidar()
+                .clone(),
+        ),
+        None => None,
+    };
+    let mut params = ApplyParams::new(a.weather, severity)
+        .clamp_rain_rate(a.clamp)
+        .near_range(a.near_range)
+        .near_range_count_scale(a.near_range_count_scale)
+        .range_noise_m(a.range_noise.unwrap_or(0.0))
+        .attenuate_intensity(a.attenuate_intensity)
+        .soft_edge(a.soft_edge)
+        .slope_source(a.slope)
+        .seed(a.seed);
+    if let Some(k) = a.range_scale {
+        params = params.range_scale(k);
+    }
+    if let Some(m) = a.clear_mor_threshold {
+        params = params.clear_mor_threshold_m(m);
+    }
+    if let Some(spec) = &lidar {
+        params = params.lidar(spec.clone());
+    }
+    let applier = params.build_from_file(&a.coefficients)?;
+    for w in applier.warnings() {
+        eprintln!("murk: warning: {w}");
+    }
+
+    let opts = BatchOptions {
+        read: ReadOptions {
+            format: None,
+            lidar,
+            intensity_scale: a.intensity_scale,
+        },
+        format: a.format,
+        pcd_data: a.pcd_data,
+    };
+    let plan = batch::plan(&a.inputs, &a.out, &opts)?;
+    if plan.jobs.is_empty() {
+        bail!(
+            "no point-cloud file among the inputs ({} other files listed below were left out)",
+            plan.skipped.len()
+        );
+    }
+    for s in &plan.skipped {
+        eprintln!("murk: skipped {}: {}", s.path.display(), s.reason);
+    }
+
+    let bar = if std::io::stderr().is_terminal() {
+        ProgressBar::new(plan.jobs.len() as u64)
+    } else {
+        ProgressBar::hidden()
+    };
+    bar.set_style(
+        ProgressStyle::with_template("{bar:40} {pos}/{len} files {elapsed} (eta {eta}) {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let report = batch::run(&applier, &plan, &opts, &|f| {
+        bar.set_message(f.summary.scan.clone());
+        bar.inc(1);
+    })?;
+    bar.finish_and_clear();
+
+    if let Some(path) = &a.summary {
+        report.write(path)?;
+    }
+    for w in report.totals.warnings.iter().skip(applier.warnings().len()) {
+        eprintln!("murk: warning: {w}");
+    }
+    print_summary(&report.totals, &report.model, report.files.len(), &a.out);
+    Ok(())
+}
+
+fn print_summary(
+    t: &ApplySummary,
+    m: &murk_infer::ModelSummary,
+    files: usize,
+    out: &std::path::Path,
+) {
+    let mor = m
+        .mor_m
+        .map_or("∞ (no rain)".into(), |v| format!("{v:.2} m"));
+    let effects: Vec<&str> = [
+        (m.near_range, "near-range returns"),
+        (m.range_noise_m.is_some(), "range noise"),
+        (m.attenuation_alpha_per_m.is_some(), "intensity attenuation"),
+    ]
+    .iter()
+    .filter(|(on, _)| *on)
+    .map(|(_, n)| *n)
+    .collect();
+    println!(
+        "applied {} at MOR {mor} ({} vanishing{}{}) to {files} files → {}",
+        m.weather,
+        m.vanishing,
+        if effects.is_empty() { "" } else { ", " },
+        effects.join(", "),
+        out.display()
+    );
+    if m.identity {
+        println!(
+            "  clear weather (MOR ≥ {} m): outputs equal inputs",
+            m.clear_mor_threshold_m
+        );
+    }
+    println!(
+        "  points in {}, out {}, vanished {} ({:.2} % kept)",
+        t.points_in,
+        t.points_out,
+        t.vanished,
+        100.0 * t.kept_fraction()
+    );
+    for (b, r) in t.bands.iter().zip(&m.bands) {
+        let hi = b
+            .reflectivity_max
+            .map_or("∞".to_string(), |v| format!("{v}"));
+        let d = r
+            .vanishing_distance_m
+            .map_or("∞".to_string(), |v| format!("{v:.2} m"));
+        println!(
+            "  reflectivity [{}, {hi}): {} in, {} vanished (beyond {d})",
+            b.reflectivity_min, b.points_in, b.vanished
+        );
+    }
+    for (name, c) in [("ghost", &t.ghost), ("ring", &t.ring)] {
+        if let Some(c) = c {
+            println!(
+                "  {name}: {} drawn, {} replaced, {} added, {} occluded{}",
+                c.drawn,
+                c.replaced,
+                c.added,
+                c.occluded,
+                if c.unplaced > 0 {
+                    format!(", {} not placed", c.unplaced)
+                } else {
+                    String::new()
+                }
+            );
+        }
+    }
+    if t.range_noise_points > 0 {
+        println!("  range noise on {} points", t.range_noise_points);
+    }
+    if t.attenuated_points > 0 {
+        println!("  intensity attenuated on {} points", t.attenuated_points);
+    }
+}
