@@ -264,7 +264,7 @@ fn kitti_projection_known_answer() {
     cloud.push(-3.0, 0.0, 0.0, 0.0, 0); // behind: ignored
     let dense = Densify {
         max_row_gap_px: 8,
-        above_scan_m: 777.0,
+        above_scan_m: Some(777.0),
     };
     let dm = DepthMap::from_lidar(&cloud, &calib, 100, 60, &dense, "axis").unwrap();
     assert_eq!(dm.get(50, 30), 10.0);
@@ -495,4 +495,60 @@ fn kitti_000008_with_lidar_depth() {
         assert!(s < last_std, "rate {rate}: std {s} not below {last_std}");
         last_std = s;
     }
+}
+
+#[test]
+fn image_write_read_round_trip_is_exact_for_png() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("out.png");
+    let (img, _) = scene(40, 30);
+    murk_infer::camera::write_rgb_atomic(&path, &img).unwrap();
+    assert_eq!(murk_infer::camera::read_rgb(&path).unwrap(), img);
+    // No temporary file left behind.
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+}
+
+#[test]
+fn image_write_with_unknown_extension_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("out.tiff");
+    let err = murk_infer::camera::write_rgb_atomic(&path, &RgbImage::new(2, 2)).unwrap_err();
+    assert!(err.to_string().contains("out.tiff"), "{err}");
+}
+
+#[test]
+fn unreadable_image_names_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("broken.png");
+    std::fs::write(&path, b"not a png").unwrap();
+    let err = murk_infer::camera::read_rgb(&path).unwrap_err();
+    assert!(err.to_string().contains("broken.png"), "{err}");
+}
+
+#[test]
+fn depth_png16_reads_metres_and_fills_zeros() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("depth.png");
+    // KITTI convention: value / 256 = metres; 0 = no measurement.
+    let raw: Vec<u16> = vec![0, 0, 2560, 0, 5120, 0];
+    image::ImageBuffer::<image::Luma<u16>, _>::from_raw(3, 2, raw)
+        .unwrap()
+        .save(&path)
+        .unwrap();
+    let d = DepthMap::from_png16(&path, 1.0 / 256.0, &Densify::default()).unwrap();
+    // Column 1 extends its 20 m upwards, column 2 its 10 m downwards, and
+    // the empty column 0 copies its nearest column, 1.
+    assert_eq!(d.as_slice(), &[20.0, 20.0, 10.0, 20.0, 20.0, 10.0]);
+}
+
+#[test]
+fn depth_png_of_8_bits_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("depth8.png");
+    image::GrayImage::new(3, 2).save(&path).unwrap();
+    let err = DepthMap::from_png16(&path, 1.0 / 256.0, &Densify::default()).unwrap_err();
+    assert!(
+        err.to_string().contains("depth8.png") && err.to_string().contains("16-bit"),
+        "{err}"
+    );
 }

@@ -8,10 +8,12 @@
 //!    two measured pixels of a row takes the value of the nearer one (ties:
 //!    the smaller depth, so thin foreground objects are not eaten);
 //! 2. *columns*: every remaining hole takes the value of the nearest
-//!    measured pixel in its column (ties: the smaller depth); holes *above*
-//!    the column's highest measurement get [`Densify::above_scan_m`] (a
-//!    scanning LiDAR sees little above its top beam: mostly sky and distant
-//!    façades), holes below its lowest measurement take that lowest value;
+//!    measured pixel in its column (ties: the smaller depth), so holes
+//!    *above* the column's highest measurement take that highest value
+//!    (façades and trees above a LiDAR's top beam are about as far as what
+//!    the beam hit) unless [`Densify::above_scan_m`] gives a fixed depth
+//!    (e.g. a far one for open sky); holes below the lowest measurement take
+//!    that lowest value;
 //! 3. columns with no measurement at all copy the nearest column that has
 //!    one (ties: the left one).
 //!
@@ -30,17 +32,18 @@ pub struct Densify {
     /// Longest run of empty pixels in a row that is filled from its row
     /// neighbours (default 8 px).
     pub max_row_gap_px: usize,
-    /// Depth given to pixels above a column's highest measurement (default
-    /// 1000 m: far enough that rain attenuation there is the full airlight
-    /// of a heavy shower).
-    pub above_scan_m: f32,
+    /// Depth given to pixels above a column's highest measurement; `None`
+    /// (default) extends the highest measurement upwards. A fixed far value
+    /// (say 1000 m) fogs everything above the scan out, which suits open
+    /// sky but not the trees and façades of a street.
+    pub above_scan_m: Option<f32>,
 }
 
 impl Default for Densify {
     fn default() -> Self {
         Densify {
             max_row_gap_px: 8,
-            above_scan_m: 1000.0,
+            above_scan_m: None,
         }
     }
 }
@@ -253,8 +256,9 @@ fn fill(mut m: Vec<f32>, w: usize, h: usize, densify: &Densify) -> Option<Vec<f3
         for (y, c) in col.iter_mut().enumerate() {
             *c = m[y * w + x];
         }
+        let above = densify.above_scan_m.unwrap_or(col[top]);
         for c in col.iter_mut().take(top) {
-            *c = densify.above_scan_m;
+            *c = above;
         }
         let bottom_v = col[bottom];
         for c in col.iter_mut().skip(bottom + 1) {
@@ -309,7 +313,7 @@ mod tests {
         ];
         let d = Densify {
             max_row_gap_px: 0,
-            above_scan_m: 500.0,
+            above_scan_m: Some(500.0),
         };
         let f = fill(m, 3, 5, &d).unwrap();
         let col1: Vec<f32> = (0..5).map(|y| f[y * 3 + 1]).collect();
@@ -325,5 +329,12 @@ mod tests {
     #[test]
     fn fill_of_nothing_is_none() {
         assert!(fill(vec![f32::NAN; 6], 3, 2, &Densify::default()).is_none());
+    }
+
+    #[test]
+    fn default_fill_extends_the_top_measurement_upwards() {
+        let n = f32::NAN;
+        let f = fill(vec![n, n, 7.0, n], 1, 4, &Densify::default()).unwrap();
+        assert_eq!(f, vec![7.0, 7.0, 7.0, 7.0]);
     }
 }

@@ -11,6 +11,8 @@
 //! - [`DepthMap`]: dense metres per pixel, from memory, a 16-bit PNG, or a
 //!   LiDAR scan projected with a [`KittiCalib`] and densified by
 //!   nearest-neighbour fill ([`Densify`]);
+//! - [`read_rgb`] / [`write_rgb_atomic`]: image files in and out (atomic
+//!   writes);
 //! - [`physics`]: the laws used (extinction, Marshall–Palmer, terminal
 //!   velocity, drop oscillation), public so they can be checked.
 //!
@@ -43,11 +45,13 @@
 
 pub mod calib;
 pub mod depth;
+pub mod io;
 pub mod photometry;
 pub mod physics;
 pub mod rain;
 
 pub use calib::{Intrinsics, KittiCalib};
 pub use depth::{Densify, DepthMap};
+pub use io::{read_rgb, write_rgb_atomic};
 pub use photometry::henyey_greenstein;
 pub use rain::{RainParams, RainRenderer, RainStats};
