@@ -552,3 +552,40 @@ fn depth_png_of_8_bits_is_refused() {
         "{err}"
     );
 }
+
+#[test]
+fn streaks_behind_a_near_wall_are_hidden() {
+    // A wall 0.15 m away hides every drop (drops start at 0.2 m): the image
+    // equals the fog-only render; without occlusion the streaks show.
+    let img = RgbImage::from_pixel(160, 90, Rgb([90, 110, 130]));
+    let depth = DepthMap::constant(160, 90, 0.15).unwrap();
+    let fog = RainParams::new(200.0).min_drop_px(1e6).check().unwrap();
+    let hidden = RainParams::new(200.0).check().unwrap();
+    let shown = RainParams::new(200.0).occlusion(false).check().unwrap();
+    let (h, st) = hidden.render_with_stats(&img, &depth).unwrap();
+    assert!(st.streaks > 0);
+    assert_eq!(st.covered_pixels, 0);
+    assert_eq!(h.as_raw(), fog.render(&img, &depth).unwrap().as_raw());
+    assert_ne!(shown.render(&img, &depth).unwrap().as_raw(), h.as_raw());
+}
+
+#[test]
+fn defocus_spreads_and_dims_out_of_focus_streaks() {
+    // A wide aperture (f/0.5) has a circle of confusion 32× that of f/16:
+    // out-of-focus streaks widen (their peak alpha drops, but stays above
+    // 1/255 over a wider band), so the covered share grows.
+    let (img, depth) = scene(320, 180);
+    let share = |n: f64| {
+        RainParams::new(100.0)
+            .lens(0.006, n)
+            .seed(4)
+            .check()
+            .unwrap()
+            .render_with_stats(&img, &depth)
+            .unwrap()
+            .1
+            .covered_share
+    };
+    let (sharp, blurred) = (share(16.0), share(0.5));
+    assert!(blurred > sharp, "f/0.5 {blurred} vs f/16 {sharp}");
+}

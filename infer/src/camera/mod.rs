@@ -27,6 +27,9 @@
 //! from drop size and defocus, alpha from τ₁/T, a brightness ripple at the
 //! drop's oscillation frequency).
 //!
+//! Images are 8-bit sRGB ([`image::RgbImage`]) in and out; the maths runs
+//! on linear RGB in `f32`.
+//!
 //! ```
 //! use image::{Rgb, RgbImage};
 //! use murk_infer::camera::{DepthMap, RainParams};

@@ -10,7 +10,7 @@
 //!   10 % of the pixels (by luminance) in the top quarter of the image rows.
 //!   In a road scene the top rows hold the sky when there is any; the bright
 //!   decile keeps façades and trees out of it.
-//! - **Environment map `E`** (our stand-in for the seed's ref. [10]): an
+//! - **Environment map `E`** (our stand-in for the seed's ref. 10): an
 //!   equirectangular map of 64 × 32 cells around the camera. Directions
 //!   inside the camera's field of view take the (block-averaged) image;
 //!   other directions take the mean of the image row at the same elevation

@@ -13,11 +13,11 @@
 //! - **Oscillation**: Rayleigh's fundamental (n = 2) mode of a water drop,
 //!   `f = (1/2π) √(8σ / (ρ r³))`, σ = 0.0728 N/m, ρ = 1000 kg/m³.
 //!
-//! The drop field replaces the particle simulator of the seed's ref. [11]:
+//! The drop field replaces the particle simulator of the seed's ref. 11:
 //! drops of diameter ≥ the minimum (1 mm) that image on at least
 //! `min_drop_px` pixels (i.e. closer than `f_x·D/min_drop_px`) are placed
 //! uniformly in the camera frustum, Poisson in number, from one ChaCha8
-//! stream (see [`sample_drops`]).
+//! stream (`sample_drops`, crate-internal).
 
 use rand::rngs::ChaCha8Rng;
 use rand::{RngExt, SeedableRng};
