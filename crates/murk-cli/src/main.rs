@@ -34,6 +34,8 @@ enum Command {
     Fit(cmd::fit::Args),
     /// Apply a fitted weather model to clear-weather point clouds.
     Apply(cmd::apply::Args),
+    /// Render physics-based rain on camera images (depth from PNGs or LiDAR).
+    Rain(cmd::rain::Args),
 }
 
 fn main() {
@@ -44,6 +46,7 @@ fn main() {
         Command::Generate(a) => cmd::generate::run(a),
         Command::Fit(a) => cmd::fit::run(a),
         Command::Apply(a) => cmd::apply::run(a),
+        Command::Rain(a) => cmd::rain::run(a),
     };
     if let Err(e) = result {
         eprintln!("murk: error: {e:#}");

@@ -5,3 +5,4 @@ pub mod campaign;
 pub mod convert;
 pub mod fit;
 pub mod generate;
+pub mod rain;
