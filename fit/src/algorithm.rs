@@ -149,13 +149,10 @@ fn fit_inputs(inputs: &FitInputs, params: &FitValidParams) -> Result<FittedTable
     let mut absent = inputs.absent.clone();
     for class in WeatherClass::DEGRADED {
         let Some(acc) = accs.get(&class) else {
-            if !absent.contains_key(&class) {
-                absent.insert(
-                    class,
-                    "every selected recording of this weather was excluded (see excluded_recordings)"
-                        .into(),
-                );
-            }
+            absent.entry(class).or_insert_with(|| {
+                "every selected recording of this weather was excluded (see excluded_recordings)"
+                    .into()
+            });
             continue;
         };
         let cx = WeatherContext {

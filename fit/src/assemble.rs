@@ -115,7 +115,7 @@ pub fn rain_conversion(samples: &[RainSample]) -> Result<RainConversion, String>
             * (1.0 - 1.0 / n)
     });
     let reliability = noise.map(|v| 1.0 - v / sxx);
-    let corrected = reliability.is_some_and(|rel| rel >= MIN_RELIABILITY && rel < 1.0);
+    let corrected = reliability.is_some_and(|rel| (MIN_RELIABILITY..1.0).contains(&rel));
     let (a, b) = match (corrected, noise) {
         (true, Some(v)) => {
             let a = sxy / (sxx - v);

@@ -307,6 +307,10 @@ pub struct DegradedJob<'a> {
     pub mor: f64,
 }
 
+/// What [`accumulate_degraded`] returns: the accumulator of every weather,
+/// and the SHA-256 of every file read.
+pub type Accumulated = (BTreeMap<WeatherClass, WeatherAcc>, Vec<(PathBuf, String)>);
+
 /// Streams the degraded recordings through pairing into accumulators.
 pub fn accumulate_degraded(
     inputs: &FitInputs,
@@ -314,7 +318,7 @@ pub fn accumulate_degraded(
     reference: &ClearReference,
     partition: &Partition,
     params: &FitValidParams,
-) -> Result<(BTreeMap<WeatherClass, WeatherAcc>, Vec<(PathBuf, String)>), FitError> {
+) -> Result<Accumulated, FitError> {
     let cells = CellTable::new(reference, partition);
     let grid = reference.grid();
     let rs = inputs.lidar.range_scale;

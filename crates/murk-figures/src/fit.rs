@@ -439,15 +439,15 @@ pub fn gaussian_histograms(
         if !(p.step > 0.0 && p.lo.is_finite()) {
             return Err(bad(path, &p.title, 0, "bin width must be > 0".into()));
         }
-        if let Some((m, s)) = p.law {
-            if !(m.is_finite() && s > 0.0) {
-                return Err(bad(
-                    path,
-                    &p.title,
-                    0,
-                    format!("law ({m}, {s}) is not usable"),
-                ));
-            }
+        if let Some((m, s)) = p.law
+            && !(m.is_finite() && s > 0.0)
+        {
+            return Err(bad(
+                path,
+                &p.title,
+                0,
+                format!("law ({m}, {s}) is not usable"),
+            ));
         }
     }
     let rows = panels.len().div_ceil(2).max(1) as u32;

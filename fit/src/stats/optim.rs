@@ -132,8 +132,9 @@ pub fn invert(a: &[Vec<f64>]) -> Option<Vec<Vec<f64>>> {
             if r != col {
                 let factor = m[r][col];
                 if factor != 0.0 {
-                    for c in 0..2 * n {
-                        m[r][c] -= factor * m[col][c];
+                    let pivot = m[col].clone();
+                    for (x, p) in m[r].iter_mut().zip(&pivot) {
+                        *x -= factor * p;
                     }
                 }
             }
