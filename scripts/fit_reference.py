@@ -48,7 +48,7 @@ RING = (0.0, 3.0)
 GHOST = (3.0, 10.0)
 MIN_POINTS = 50
 CENSOR_FRACTION, CENSOR_MIN = 0.02, 10
-LOG_STEP = 0.0025
+LOG_STEP = 0.01  # as murk-fit's survival_log_step
 U_MIN, U_MAX = 1e-4, 1e3
 BOOTSTRAP = 1000
 

@@ -94,7 +94,7 @@ impl Band {
 /// | `edge` | probit | shape of the soft survival edge | probit, logistic |
 /// | `shared_edge_width` | true | one edge width for all bands (else one per band) | |
 /// | `free_dropout` | true | fit the dropout ε per weather (else fix it to the clear-weather value) | |
-/// | `survival_log_step` | 0.0025 | bin width of ln(r / MOR) in the survival histogram | (0, 0.1] |
+/// | `survival_log_step` | 0.01 | bin width of ln(r / MOR) in the survival histogram (1 % in range: far finer than any edge or slope the data resolve) | (0, 0.1] |
 /// | `reflectivity_floor` | 0 | lower truncation of the ghost/ring reflectivity laws | finite |
 /// | `count_mor_ref_m` | 100 | reference MOR of the count-per-scan power law, metres | > 0 |
 /// | `bootstrap_replicates` | 1000 | bootstrap-over-recordings replicates for rate uncertainties (0: none) | 0–100 000 |
@@ -151,7 +151,7 @@ impl Default for FitParams {
             edge: EdgeShape::Probit,
             shared_edge_width: true,
             free_dropout: true,
-            survival_log_step: 0.0025,
+            survival_log_step: 0.01,
             reflectivity_floor: 0.0,
             count_mor_ref_m: 100.0,
             bootstrap_replicates: 1000,
