@@ -2,7 +2,6 @@
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
-use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
 use murk_campaign::Campaign;
@@ -440,22 +439,16 @@ fn fmt_opt(x: Option<f64>, digits: usize) -> String {
     }
 }
 
-/// Writes `bytes` to `path` atomically (temporary file in the same folder,
-/// synced, renamed).
+/// Writes `bytes` to `path` atomically ([`murk_types::write_atomic`]),
+/// creating its folder when missing.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), FitError> {
-    let err = |e: std::io::Error| FitError::File {
+    let err = |reason: String| FitError::File {
         path: path.to_path_buf(),
-        reason: format!("cannot write: {e}"),
-    };
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
-        _ => PathBuf::from("."),
+        reason,
     };
     // A fresh checkout has no `out/`: make the folder, as `--figures` does.
-    std::fs::create_dir_all(&dir).map_err(err)?;
-    let mut tmp = tempfile::NamedTempFile::new_in(&dir).map_err(err)?;
-    tmp.write_all(bytes).map_err(err)?;
-    tmp.as_file().sync_all().map_err(err)?;
-    tmp.persist(path).map_err(|e| err(e.error))?;
-    Ok(())
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).map_err(|e| err(format!("cannot write: {e}")))?;
+    }
+    murk_types::write_atomic(path, bytes).map_err(|e| err(format!("cannot write: {e}")))
 }

@@ -122,29 +122,12 @@ impl BatchReport {
     }
 }
 
-/// Writes `bytes` to `path` through a temporary file in the same folder.
+/// Writes `bytes` to `path` atomically ([`murk_types::write_atomic`]).
 pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), InferError> {
-    let fs = |action: &'static str, p: &Path| {
-        let p = p.to_path_buf();
-        move |source| InferError::Fs {
-            path: p,
-            action,
-            source,
-        }
-    };
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    };
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let tmp = dir.join(format!(".{name}.{}.tmp", std::process::id()));
-    std::fs::write(&tmp, bytes).map_err(fs("write temporary file", &tmp))?;
-    std::fs::rename(&tmp, path).map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        fs("rename temporary file", path)(e)
+    murk_types::write_atomic(path, bytes).map_err(|e| InferError::Fs {
+        path: path.to_path_buf(),
+        action: e.action,
+        source: e.source,
     })
 }
 

@@ -73,7 +73,6 @@ mod ring;
 mod table;
 mod text;
 
-use std::io::Write as _;
 use std::path::Path;
 
 use murk_types::{LidarSpec, PointCloud, PointFormat};
@@ -232,34 +231,11 @@ pub fn write_cloud_with(
     write_atomic(path, &bytes)
 }
 
-/// Writes `bytes` to `path` through a temporary file in the same folder.
+/// Writes `bytes` to `path` atomically ([`murk_types::write_atomic`]).
 fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
-    let io = |action: &'static str| {
-        move |source: std::io::Error| IoError::Io {
-            path: path.to_path_buf(),
-            action,
-            source,
-        }
-    };
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    };
-    let mut builder = tempfile::Builder::new();
-    builder.prefix(".murk-").suffix(".tmp");
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt as _;
-        // Same mode as a plainly created file (the umask still applies),
-        // not the 0600 of a temporary file.
-        builder.permissions(std::fs::Permissions::from_mode(0o666));
-    }
-    let mut tmp = builder
-        .tempfile_in(dir)
-        .map_err(io("create temporary file"))?;
-    tmp.write_all(bytes).map_err(io("write"))?;
-    tmp.as_file().sync_data().map_err(io("sync"))?;
-    tmp.persist(path)
-        .map_err(|e| io("rename temporary file")(e.error))?;
-    Ok(())
+    murk_types::write_atomic(path, bytes).map_err(|e| IoError::Io {
+        path: path.to_path_buf(),
+        action: e.action,
+        source: e.source,
+    })
 }

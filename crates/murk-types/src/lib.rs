@@ -35,6 +35,7 @@
 //! assert_eq!(vlp16.elevation_deg[ring as usize], 1.0);
 //! ```
 
+mod atomic;
 mod cloud;
 mod error;
 mod format;
@@ -43,6 +44,7 @@ mod lidar;
 mod table;
 mod weather;
 
+pub use atomic::{AtomicWriteError, write_atomic};
 pub use cloud::PointCloud;
 pub use error::TypesError;
 pub use format::PointFormat;

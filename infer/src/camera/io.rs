@@ -29,37 +29,12 @@ pub fn write_rgb_atomic(path: &Path, img: &RgbImage) -> Result<(), InferError> {
             path: path.to_path_buf(),
             reason: "output must end in .png, .jpg or .jpeg".to_string(),
         })?;
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
-        _ => std::path::PathBuf::from("."),
-    };
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let tmp = dir.join(format!(".{name}.tmp-{}", std::process::id()));
-    let fs = |action: &'static str, p: &Path, source: std::io::Error| InferError::Fs {
-        path: p.to_path_buf(),
-        action,
-        source,
-    };
-    {
-        let file =
-            std::fs::File::create(&tmp).map_err(|e| fs("create a temporary file", &tmp, e))?;
-        let mut w = std::io::BufWriter::new(file);
-        img.write_to(&mut w, format)
-            .map_err(|e| InferError::Input {
-                path: path.to_path_buf(),
-                reason: format!("cannot encode the image: {e}"),
-            })?;
-        let file = w
-            .into_inner()
-            .map_err(|e| fs("flush the temporary file", &tmp, e.into_error()))?;
-        file.sync_all()
-            .map_err(|e| fs("sync the temporary file", &tmp, e))?;
-    }
-    std::fs::rename(&tmp, path).map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        fs("rename the temporary file over the output", path, e)
-    })
+    // Encoded in memory (an image is a few MB), then written atomically.
+    let mut bytes = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut bytes, format)
+        .map_err(|e| InferError::Input {
+            path: path.to_path_buf(),
+            reason: format!("cannot encode the image: {e}"),
+        })?;
+    crate::batch::write_atomic(path, bytes.get_ref())
 }

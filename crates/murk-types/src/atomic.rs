@@ -1,0 +1,54 @@
+//! Atomic file writes, shared by every crate that writes: the bytes go to a
+//! temporary file in the target's folder, are synced, and the file is renamed
+//! over the target, so a reader sees the old file or the new one, never half
+//! of one, and a failed write leaves no temporary file behind.
+//!
+//! ```
+//! let dir = tempfile::tempdir()?;
+//! let path = dir.path().join("table.json");
+//! murk_types::write_atomic(&path, b"{}")?;
+//! assert_eq!(std::fs::read(&path)?, b"{}");
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+use std::io::Write as _;
+use std::path::Path;
+
+/// Why an atomic write failed: the step that failed and the system's error.
+/// Each crate wraps it in its own error with the path.
+#[derive(Debug, thiserror::Error)]
+#[error("cannot {action}: {source}")]
+pub struct AtomicWriteError {
+    /// What was being done ("create temporary file", "write", "sync",
+    /// "rename temporary file").
+    pub action: &'static str,
+    /// The system's error.
+    #[source]
+    pub source: std::io::Error,
+}
+
+/// Writes `bytes` to `path` atomically (temporary file in the same folder,
+/// synced, renamed). The file gets the mode of a plainly created file (0666
+/// less the umask on Unix), not the 0600 of a temporary file.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), AtomicWriteError> {
+    let err = |action: &'static str| move |source| AtomicWriteError { action, source };
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(".murk-").suffix(".tmp");
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt as _;
+        builder.permissions(std::fs::Permissions::from_mode(0o666));
+    }
+    let mut tmp = builder
+        .tempfile_in(dir)
+        .map_err(err("create temporary file"))?;
+    tmp.write_all(bytes).map_err(err("write"))?;
+    tmp.as_file().sync_data().map_err(err("sync"))?;
+    tmp.persist(path)
+        .map_err(|e| err("rename temporary file")(e.error))?;
+    Ok(())
+}
