@@ -188,7 +188,7 @@ impl MorStats {
         let mut v = values.to_vec();
         v.sort_by(f64::total_cmp);
         let (min, max) = (v[0], v[v.len() - 1]);
-        let width = nice_step((max - min) / 10.0);
+        let width = murk_types::nice_step((max - min) / 10.0);
         let start = (min / width).floor() * width;
         let bins = (((max - start) / width).floor() as usize + 1).max(1);
         let mut histogram: Vec<HistogramBin> = (0..bins)
@@ -221,19 +221,6 @@ fn quantile(v: &[f64], p: f64) -> f64 {
     let lo = h.floor() as usize;
     let hi = h.ceil() as usize;
     v[lo] + (h - lo as f64) * (v[hi] - v[lo])
-}
-
-/// The smallest of 1, 2, 2.5, 5 × 10ᵏ that is ≥ `raw` (1 for `raw` ≤ 0).
-fn nice_step(raw: f64) -> f64 {
-    if raw.is_nan() || raw <= 0.0 {
-        return 1.0;
-    }
-    let base = 10f64.powf(raw.log10().floor());
-    [1.0, 2.0, 2.5, 5.0, 10.0]
-        .into_iter()
-        .map(|m| m * base)
-        .find(|s| *s >= raw * (1.0 - 1e-12))
-        .unwrap_or(10.0 * base)
 }
 
 /// Counts of one weather class.
@@ -501,14 +488,5 @@ mod tests {
         assert_eq!(s.histogram.len(), 1);
         assert_eq!(s.histogram[0].count, 1);
         assert_eq!(s.median, 123.0);
-    }
-
-    #[test]
-    fn nice_steps() {
-        assert_eq!(nice_step(12.3), 20.0);
-        assert_eq!(nice_step(2.2), 2.5);
-        assert_eq!(nice_step(0.0), 1.0);
-        assert_eq!(nice_step(40.0), 50.0);
-        assert_eq!(nice_step(100.0), 100.0);
     }
 }

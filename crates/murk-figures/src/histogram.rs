@@ -46,19 +46,6 @@ impl Bins {
     }
 }
 
-/// The smallest of 1, 2, 2.5, 5 × 10ᵏ that is ≥ `raw` (1 for `raw` ≤ 0).
-fn nice_step(raw: f64) -> f64 {
-    if raw.is_nan() || raw <= 0.0 {
-        return 1.0;
-    }
-    let base = 10f64.powf(raw.log10().floor());
-    [1.0, 2.0, 2.5, 5.0, 10.0]
-        .into_iter()
-        .map(|m| m * base)
-        .find(|s| *s >= raw * (1.0 - 1e-12))
-        .unwrap_or(10.0 * base)
-}
-
 /// Bins shared by every series: a round width giving at most about
 /// `target` bins over the range of all values, edges on multiples of the
 /// width. One unit-wide bin at 0 when there is no value.
@@ -74,7 +61,7 @@ pub fn shared_bins(series: &[(&str, &[f64])], target: usize) -> Bins {
             count: 1,
         };
     }
-    let width = nice_step((max - min) / target.max(1) as f64);
+    let width = murk_types::nice_step((max - min) / target.max(1) as f64);
     let start = (min / width).floor() * width;
     let count = ((max - start) / width).floor() as usize + 1;
     Bins {

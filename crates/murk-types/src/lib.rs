@@ -36,6 +36,7 @@
 //! ```
 
 mod atomic;
+mod bins;
 mod cloud;
 mod error;
 mod format;
@@ -45,6 +46,7 @@ mod table;
 mod weather;
 
 pub use atomic::{AtomicWriteError, write_atomic};
+pub use bins::nice_step;
 pub use cloud::PointCloud;
 pub use error::TypesError;
 pub use format::PointFormat;
