@@ -545,6 +545,7 @@ pub fn weather(
         mor_from_rain_rate,
         mor_from_rain_rate_reason,
         reflectivity_sweep,
+        extensions: Vec::new(),
     };
     let diagnostics = WeatherDiagnostics {
         mor: mors,

@@ -54,6 +54,37 @@ pub fn pair_recording(
     points: &[CellPoint],
     params: &FitValidParams,
 ) -> RecordingTally {
+    pair(reference, points, params, None)
+}
+
+/// A paired (no change) return: the reference cell it paired with and its
+/// index in the recording's points.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Pair {
+    /// Reference cell (its own cell or an azimuth neighbour).
+    pub cell: u32,
+    /// Index of the degraded return in the points given.
+    pub point: u32,
+}
+
+/// [`pair_recording`], also listing every pair (for per-return residuals of
+/// range and reflectivity).
+pub fn pair_recording_detailed(
+    reference: &ClearReference,
+    points: &[CellPoint],
+    params: &FitValidParams,
+) -> (RecordingTally, Vec<Pair>) {
+    let mut pairs = Vec::new();
+    let t = pair(reference, points, params, Some(&mut pairs));
+    (t, pairs)
+}
+
+fn pair(
+    reference: &ClearReference,
+    points: &[CellPoint],
+    params: &FitValidParams,
+    mut pairs: Option<&mut Vec<Pair>>,
+) -> RecordingTally {
     let grid = reference.grid();
     let mut t = RecordingTally {
         matched: vec![0; grid.cells()],
@@ -75,7 +106,14 @@ pub fn pair_recording(
     };
     let mut left = Vec::new();
     for (i, p) in points.iter().enumerate() {
-        if !try_pair(&mut t.matched, p.cell as usize, p.range) {
+        if try_pair(&mut t.matched, p.cell as usize, p.range) {
+            if let Some(v) = pairs.as_deref_mut() {
+                v.push(Pair {
+                    cell: p.cell,
+                    point: i as u32,
+                });
+            }
+        } else {
             left.push(i);
         }
     }
@@ -87,7 +125,14 @@ pub fn pair_recording(
         let cell = p.cell as usize;
         for d in 1..=k {
             for off in [-d, d] {
-                if try_pair(&mut t.matched, grid.shifted(cell, off), p.range) {
+                let c = grid.shifted(cell, off);
+                if try_pair(&mut t.matched, c, p.range) {
+                    if let Some(v) = pairs.as_deref_mut() {
+                        v.push(Pair {
+                            cell: c as u32,
+                            point: i as u32,
+                        });
+                    }
                     continue 'points;
                 }
             }
@@ -179,6 +224,14 @@ mod tests {
         // Every return closer than 10 m, in input order: the ring, the ghost
         // and the scene one at 6 m in cell 5.
         assert_eq!(t.occluders, vec![1.5, 6.0, 6.0]);
+        // The detailed pairing gives the same tally and names the pairs:
+        // point 0 with its own cell, point 1 with neighbour cell 1.
+        let (t2, pairs) = pair_recording_detailed(&r, &pts, &p);
+        assert_eq!(t2, t);
+        assert_eq!(
+            pairs,
+            vec![Pair { cell: 0, point: 0 }, Pair { cell: 1, point: 1 }]
+        );
     }
 
     #[test]

@@ -179,6 +179,8 @@ pub struct Applier {
     pub(crate) azimuth_resolution_deg: f64,
     pub(crate) seed: u64,
     pub(crate) warnings: Vec<String>,
+    pub(crate) extensions: Vec<murk_types::ModelExtension>,
+    pub(crate) scan_covariates: std::collections::BTreeMap<String, murk_types::CovariateValue>,
 }
 
 /// A serialisable description of an [`Applier`]: what was applied.
@@ -215,6 +217,12 @@ pub struct ModelSummary {
     pub bands: Vec<BandSummaryRule>,
     /// Warnings raised while checking the parameters.
     pub warnings: Vec<String>,
+    /// Extension terms applied (from `murk diagnose`), empty for a plain table.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub extensions: Vec<murk_types::ModelExtension>,
+    /// Scan-level covariate values supplied for the extension terms.
+    #[serde(skip_serializing_if = "std::collections::BTreeMap::is_empty")]
+    pub covariates: std::collections::BTreeMap<String, murk_types::CovariateValue>,
 }
 
 /// One band of a [`ModelSummary`] (finite numbers or null, for JSON).
@@ -310,6 +318,12 @@ impl Applier {
                 })
                 .collect(),
             warnings: self.warnings.clone(),
+            extensions: if self.identity {
+                vec![]
+            } else {
+                self.extensions.clone()
+            },
+            covariates: self.scan_covariates.clone(),
         }
     }
 
@@ -386,6 +400,9 @@ impl Applier {
             summary.below_bands = counts.below();
             summary.above_bands = counts.above;
             return Ok((cloud.clone(), summary));
+        }
+        if !self.extensions.is_empty() {
+            return self.apply_extended(cloud, key, summary);
         }
         let seed = ScanSeed::new(self.seed, key);
         let mut mask = Vec::new();

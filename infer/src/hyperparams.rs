@@ -5,7 +5,11 @@
 //! returns the [`Applier`] that does the work. Every refusal names the
 //! parameter or the table field and the allowed range.
 
-use murk_types::{CoefficientTable, LidarSpec, NoiseLaw, WeatherClass, WeatherCoefficients};
+use std::collections::BTreeMap;
+
+use murk_types::{
+    CoefficientTable, CovariateValue, LidarSpec, NoiseLaw, WeatherClass, WeatherCoefficients,
+};
 
 use crate::applier::{Applier, BandRule, NearLaw, RainUse, SoftEdge};
 use crate::error::InferError;
@@ -97,6 +101,8 @@ pub struct ApplyParams {
     lidar: Option<LidarSpec>,
     azimuth_resolution_deg: Option<f64>,
     seed: u64,
+    covariates: BTreeMap<String, CovariateValue>,
+    extensions: bool,
 }
 
 impl ApplyParams {
@@ -117,6 +123,8 @@ impl ApplyParams {
             lidar: None,
             azimuth_resolution_deg: None,
             seed: 0,
+            covariates: BTreeMap::new(),
+            extensions: true,
         }
     }
 
@@ -199,6 +207,21 @@ impl ApplyParams {
     /// Sets the master seed.
     pub fn seed(mut self, seed: u64) -> Self {
         self.seed = seed;
+        self
+    }
+
+    /// The value of a scan-level covariate (a `weather.csv` column) for the
+    /// table's extension terms; terms whose covariate is not given use their
+    /// fitted default, with a warning.
+    pub fn covariate(mut self, name: impl Into<String>, value: CovariateValue) -> Self {
+        self.covariates.insert(name.into(), value);
+        self
+    }
+
+    /// Whether to apply the table's extension terms (on by default; off
+    /// applies the baseline model of an extended table).
+    pub fn extensions(mut self, on: bool) -> Self {
+        self.extensions = on;
         self
     }
 
@@ -456,6 +479,33 @@ impl ApplyParams {
             (None, None)
         };
 
+        // Extension terms (from `murk diagnose`).
+        let extensions = if self.extensions && !identity {
+            coeffs.extensions.clone()
+        } else {
+            Vec::new()
+        };
+        for (i, e) in extensions.iter().enumerate() {
+            e.check()
+                .map_err(|r| missing(format!("weathers.{w}.extensions[{i}]"), r))?;
+            if e.is_point_level() || e.covariate == "mor" {
+                continue;
+            }
+            if !self.covariates.contains_key(&e.covariate) {
+                warnings.push(format!(
+                    "extension term on {} along {:?}: no value given (--covariate), using its fitted default {}",
+                    e.observable.name(),
+                    e.covariate,
+                    e.default
+                ));
+            }
+        }
+        if !extensions.is_empty() && self.slope_source == SlopeSource::Quantile {
+            return Err(InferError::Conflict(
+                "the table's extension terms were fitted on vanishing_slope; use slope_source = survival or turn extensions off".into(),
+            ));
+        }
+
         Ok(Applier {
             weather: w,
             mor_m: mor,
@@ -475,6 +525,8 @@ impl ApplyParams {
             azimuth_resolution_deg: az_res,
             seed: self.seed,
             warnings,
+            extensions,
+            scan_covariates: self.covariates.clone(),
         })
     }
 }

@@ -71,6 +71,7 @@ mod applier;
 pub mod batch;
 pub mod camera;
 mod error;
+mod extension;
 mod hyperparams;
 mod kernel;
 mod near;

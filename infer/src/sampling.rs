@@ -28,6 +28,8 @@ pub(crate) enum Purpose {
     RangeNoise = 2,
     /// Near-range returns: counts, laws and rays.
     NearRange = 3,
+    /// Survival draws of the extension path, one per point.
+    Extension = 4,
 }
 
 /// The per-scan seed: SHA-256 over the master seed and the scan key.

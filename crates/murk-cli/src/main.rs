@@ -34,6 +34,8 @@ enum Command {
     Fit(cmd::fit::Args),
     /// Apply a fitted weather model to clear-weather point clouds.
     Apply(cmd::apply::Args),
+    /// Show what a fitted model gets wrong on held-out recordings, why, and what extending it gains.
+    Diagnose(cmd::diagnose::Args),
     /// Render physics-based rain on camera images (depth from PNGs or LiDAR).
     Rain(cmd::rain::Args),
 }
@@ -47,6 +49,7 @@ fn main() {
         Command::Fit(a) => cmd::fit::run(a),
         Command::Apply(a) => cmd::apply::run(a),
         Command::Rain(a) => cmd::rain::run(a),
+        Command::Diagnose(a) => cmd::diagnose::run(a),
     };
     if let Err(e) = result {
         eprintln!("murk: error: {e:#}");

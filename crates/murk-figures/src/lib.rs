@@ -13,6 +13,7 @@
 //!   panel per class on a shared axis (the seed report's Figure 24).
 //! - [`range_vs_mor`], [`slope_vs_reflectivity`], [`gaussian_histograms`]:
 //!   the figures of a fit (the seed's Figures 26, 27 and 29).
+//! - [`residual_profile`], [`bev_panels`]: the figures of a diagnosis.
 //!
 //! ```
 //! use murk_figures::{FigureOptions, mor_histogram};
@@ -29,11 +30,13 @@
 //! # }
 //! ```
 
+mod diagnosis;
 mod error;
 mod fit;
 mod histogram;
 mod output;
 
+pub use diagnosis::{ProfileFigure, bev_panels, residual_profile};
 pub use error::FigureError;
 pub use fit::{
     GaussianPanel, QuantileMarker, RangeMorFigure, SlopeLine, SweepSeries, gaussian_histograms,

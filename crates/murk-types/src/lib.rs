@@ -39,6 +39,7 @@ mod atomic;
 mod bins;
 mod cloud;
 mod error;
+mod extension;
 mod format;
 mod intensity;
 mod lidar;
@@ -49,6 +50,10 @@ pub use atomic::{AtomicWriteError, write_atomic};
 pub use bins::nice_step;
 pub use cloud::PointCloud;
 pub use error::TypesError;
+pub use extension::{
+    CovariateValue, ExtensionFunction, ExtensionObservable, ModelExtension, POINT_COVARIATES,
+    PointCovariates, combine as combine_extensions,
+};
 pub use format::PointFormat;
 pub use intensity::IntensityScale;
 pub use lidar::LidarSpec;

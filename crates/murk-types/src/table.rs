@@ -121,6 +121,10 @@ pub struct WeatherCoefficients {
     /// seed's Figure 27).
     #[serde(default)]
     pub reflectivity_sweep: Vec<SweepBand>,
+    /// Terms added along further covariates by `murk diagnose` (empty for a
+    /// plain fit); see [`crate::ModelExtension`].
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub extensions: Vec<crate::ModelExtension>,
 }
 
 /// One reflectivity band of a slope list.
@@ -569,6 +573,12 @@ impl CoefficientTable {
                 v.rate(Some(s.dropout), &format!("{f}.dropout"));
                 v.rate(Some(s.residual), &format!("{f}.residual"));
             }
+            for (i, e) in c.extensions.iter().enumerate() {
+                let res = e.check();
+                v.check(res.is_ok(), &format!("{at}.extensions[{i}]"), || {
+                    res.unwrap_err()
+                });
+            }
         }
         if let Some(c) = &self.clear {
             v.rate(c.no_change_rate, "clear.no_change_rate");
@@ -739,6 +749,7 @@ mod tests {
             mor_from_rain_rate: None,
             mor_from_rain_rate_reason: None,
             reflectivity_sweep: vec![],
+            extensions: vec![],
         };
         CoefficientTable {
             format: TABLE_FORMAT.into(),

@@ -3,6 +3,8 @@
 pub mod apply;
 pub mod campaign;
 pub mod convert;
+pub mod diagnose;
+pub mod diagnose_figures;
 pub mod fit;
 pub mod generate;
 pub mod rain;

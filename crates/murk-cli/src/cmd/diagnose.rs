@@ -1,0 +1,150 @@
+//! `murk diagnose CAMPAIGN --weather W [--coefficients T.json] --out report.json`:
+//! what the fitted model gets wrong on held-out recordings, why, and what
+//! extending it gains.
+//!
+//! Glue only: flags → [`murk_diagnose::DiagnoseParams`] →
+//! [`murk_diagnose::DiagnoseValidParams::run`] → the report (and the extended
+//! table, and figures) written atomically.
+
+use std::path::PathBuf;
+
+use anyhow::Context as _;
+use murk_campaign::Campaign;
+use murk_diagnose::DiagnoseParams;
+use murk_diagnose::scene::VoxelBox;
+use murk_types::{CoefficientTable, WeatherClass};
+
+/// Arguments of `murk diagnose`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// The campaign folder.
+    pub campaign: PathBuf,
+    /// The weather to diagnose: fog, rain or snow.
+    #[arg(long)]
+    pub weather: String,
+    /// A baseline coefficient table (default: fit one per fold).
+    #[arg(long)]
+    pub coefficients: Option<PathBuf>,
+    /// Where to write the report (JSON, written atomically).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Where to write the extended coefficient table (default: beside the
+    /// report, `<out stem>.extended.json`), when there is a finding.
+    #[arg(long)]
+    pub extended_table: Option<PathBuf>,
+    /// Folder for the figures (PNG and SVG); created when missing.
+    #[arg(long)]
+    pub figures: Option<PathBuf>,
+    /// Folds by recording.
+    #[arg(long, default_value_t = 3)]
+    pub folds: usize,
+    /// Seed of the fold split, permutations and simulations.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Null draws per test.
+    #[arg(long, default_value_t = 1999)]
+    pub permutations: usize,
+    /// Family-wise error rate.
+    #[arg(long, default_value_t = 0.05)]
+    pub alpha: f64,
+    /// Simulations per held-out recording.
+    #[arg(long, default_value_t = 2)]
+    pub sims: usize,
+    /// Voxel size of the scene metrics, metres.
+    #[arg(long, default_value_t = 1.0)]
+    pub voxel: f64,
+    /// Box of the localised voxel difference: `xmin,ymin,zmin,xmax,ymax,zmax`.
+    #[arg(long, value_delimiter = ',', num_args = 6)]
+    pub local_box: Option<Vec<f64>>,
+}
+
+/// Runs `murk diagnose`.
+pub fn run(a: Args) -> anyhow::Result<()> {
+    let weather: WeatherClass = a
+        .weather
+        .parse()
+        .map_err(|e| anyhow::anyhow!("--weather {:?}: {e}", a.weather))?;
+    let campaign = Campaign::open(&a.campaign)
+        .with_context(|| format!("opening campaign {}", a.campaign.display()))?;
+    let table = match &a.coefficients {
+        Some(p) => Some(
+            CoefficientTable::read(p)
+                .with_context(|| format!("reading coefficient table {}", p.display()))?,
+        ),
+        None => None,
+    };
+    let local_box = a.local_box.as_ref().map(|v| VoxelBox {
+        min: [v[0], v[1], v[2]],
+        max: [v[3], v[4], v[5]],
+    });
+    let params = DiagnoseParams::new(weather)
+        .folds(a.folds)
+        .seed(a.seed)
+        .permutations(a.permutations)
+        .alpha(a.alpha)
+        .sims(a.sims)
+        .voxel_m(a.voxel)
+        .local_box(local_box)
+        .coefficients(table)
+        .check()?;
+    let d = params.run(&campaign)?;
+    let r = &d.report;
+    if let Some(parent) = a.out.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent)
+            .with_context(|| format!("creating {}", parent.display()))?;
+    }
+    murk_types::write_atomic(&a.out, r.to_json().as_bytes())
+        .with_context(|| format!("writing {}", a.out.display()))?;
+    let m = &r.baseline.metrics;
+    println!(
+        "{}: {} recordings held out over {} folds; baseline survival log loss {:.4}, voxel global difference {}",
+        r.weather,
+        r.heldout_recordings,
+        r.folds,
+        m.survival_log_loss,
+        m.voxel_global_difference
+            .map_or("n/a".to_string(), |v| format!("{v:.3}"))
+    );
+    let sig: Vec<_> = r.findings.iter().filter(|f| f.significant).collect();
+    if sig.is_empty() {
+        println!(
+            "no significant finding (Holm-adjusted p < {} and effect ≥ threshold)",
+            a.alpha
+        );
+    }
+    for f in &sig {
+        println!(
+            "  {} vs {:?}: strength {:.2} (effect {:.4}, p_adj {:.4}) — {}",
+            f.observable, f.covariate, f.strength, f.effect, f.p_adjusted, f.cause
+        );
+    }
+    if let Some(g) = &r.gain {
+        println!(
+            "extended along the top finding: {} {:.4} → {:.4} on held-out recordings ({:+.1} %)",
+            g.metric,
+            g.before,
+            g.after,
+            100.0 * g.relative
+        );
+    }
+    if let Some(t) = &d.extended_table {
+        let path = a.extended_table.clone().unwrap_or_else(|| {
+            let stem = a
+                .out
+                .file_stem()
+                .and_then(|s| s.to_str())
+                .unwrap_or("report");
+            a.out.with_file_name(format!("{stem}.extended.json"))
+        });
+        let json = t.to_json().context("serialising the extended table")?;
+        murk_types::write_atomic(&path, json.as_bytes())
+            .with_context(|| format!("writing {}", path.display()))?;
+        println!("extended table: {}", path.display());
+    }
+    if let Some(dir) = &a.figures {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        crate::cmd::diagnose_figures::write(&d, dir)?;
+    }
+    println!("report: {}", a.out.display());
+    Ok(())
+}

@@ -1,0 +1,361 @@
+//! Reading a campaign for diagnosis: the clear reference, and every degraded
+//! recording of one weather reduced to what it shows per reference cell.
+//!
+//! Pairing is murk-fit's own ([`murk_fit::pairing`]), so the diagnosis sees
+//! exactly the classes the fit saw: per reference cell, how many of its
+//! expected returns were kept (*no change*); for each kept return, its
+//! measured range and reflectivity; per recording, the number of ghost and
+//! ring returns. Cells whose clear return is hidden behind a nearer weather
+//! return (their fate is unknown) are left out of the survival units, as the
+//! fit leaves them out.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use murk_campaign::{Campaign, Cell};
+use murk_fit::driver::{FitInputs, RecordingInput, build_reference, read_lidar};
+use murk_fit::pairing::pair_recording_detailed;
+use murk_fit::reference::{CellGrid, ClearReference};
+use murk_fit::{FitError, FitValidParams};
+use murk_io::ReadOptions;
+use murk_types::{CovariateValue, LidarSpec, PointCloud, PointCovariates, WeatherClass};
+use rayon::prelude::*;
+
+use crate::DiagnoseError;
+
+/// A reference cell: the clear return expected in it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CellInfo {
+    /// Expected returns per recording.
+    pub hits: u16,
+    /// The clear return's point-level covariates (range, reflectivity, ring,
+    /// elevation of the ring, azimuth of the bin centre).
+    pub cov: PointCovariates,
+    /// Mean of (kept range − reference range) over the clear recordings'
+    /// returns paired with this cell, metres: what pairing alone does to the
+    /// range (azimuth jitter, neighbour cells, edges), subtracted from the
+    /// degraded residuals so that only weather remains.
+    pub clear_range_offset: f64,
+    /// The same for the log reflectivity ratio.
+    pub clear_log_reflectivity_offset: f64,
+}
+
+/// One survival unit: a reference cell in one recording.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Unit {
+    /// Reference cell.
+    pub cell: u32,
+    /// Expected returns.
+    pub trials: u16,
+    /// Returns kept (paired).
+    pub kept: u16,
+}
+
+/// A kept (paired) return.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Kept {
+    /// Reference cell it paired with.
+    pub cell: u32,
+    /// Measured range, metres.
+    pub range: f32,
+    /// Measured calibrated reflectivity.
+    pub reflectivity: f32,
+}
+
+/// A degraded recording as the diagnosis sees it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Rec {
+    /// Recording id.
+    pub id: String,
+    /// Position in `weather.csv`.
+    pub order: usize,
+    /// MOR, metres (the rule set's visibility sensors).
+    pub mor: f64,
+    /// Every `weather.csv` column with a value (the timestamp as seconds
+    /// since 1970).
+    pub scan: BTreeMap<String, CovariateValue>,
+    /// The point-cloud file.
+    pub lidar: PathBuf,
+    /// Survival units.
+    pub units: Vec<Unit>,
+    /// Kept returns.
+    pub kept: Vec<Kept>,
+    /// Ghost and ring returns measured.
+    pub near: u64,
+    /// Index of the nearest clear recording in time (into `Loaded::clear`).
+    pub clear: usize,
+}
+
+/// A clear recording.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ClearRec {
+    /// Recording id.
+    pub id: String,
+    /// Position in `weather.csv`.
+    pub order: usize,
+    /// The point-cloud file.
+    pub lidar: PathBuf,
+}
+
+/// A campaign read for one weather.
+#[derive(Debug, Clone)]
+pub struct Loaded {
+    /// The weather.
+    pub weather: WeatherClass,
+    /// The LiDAR.
+    pub spec: LidarSpec,
+    /// The clear reference.
+    pub reference: ClearReference,
+    /// Per cell of the grid (`None` outside the reference).
+    pub cells: Vec<Option<CellInfo>>,
+    /// The clear recordings.
+    pub clear: Vec<ClearRec>,
+    /// The degraded recordings of the weather, in campaign order.
+    pub recs: Vec<Rec>,
+    /// The scan-level covariate names: `mor`, then every `weather.csv`
+    /// column (with `timestamp`) in header order.
+    pub columns: Vec<String>,
+    /// The fit's view of the selected recordings.
+    pub inputs: FitInputs,
+    /// Recordings of the weather left out, with the reason.
+    pub skipped: Vec<(String, String)>,
+}
+
+fn fit_err(e: FitError) -> DiagnoseError {
+    DiagnoseError::Read {
+        path: PathBuf::from("(campaign)"),
+        reason: e.to_string(),
+    }
+}
+
+/// Reflectivity below which the log ratio is floored.
+pub const REFLECTIVITY_FLOOR: f64 = 0.5;
+
+/// `ln(measured / reference)` with both floored at [`REFLECTIVITY_FLOOR`].
+pub fn log_ratio(measured: f64, reference: f64) -> f64 {
+    measured.max(REFLECTIVITY_FLOOR).ln() - reference.max(REFLECTIVITY_FLOOR).ln()
+}
+
+/// Reads a point cloud in calibrated reflectivity.
+pub fn read_calibrated(path: &Path, spec: &LidarSpec) -> Result<PointCloud, DiagnoseError> {
+    let opts = ReadOptions {
+        lidar: Some(spec.clone()),
+        intensity_scale: spec.intensity_scale,
+        ..Default::default()
+    };
+    let mut cloud = murk_io::read_cloud(path, &opts).map_err(|e| DiagnoseError::Read {
+        path: path.to_path_buf(),
+        reason: e.to_string(),
+    })?;
+    cloud.to_calibrated();
+    Ok(cloud)
+}
+
+/// Reads `campaign` for `weather`: the reference from every clear recording
+/// and the observations of every degraded recording of the weather.
+pub fn load(
+    campaign: &Campaign,
+    weather: WeatherClass,
+    params: &FitValidParams,
+) -> Result<Loaded, DiagnoseError> {
+    let inputs = FitInputs::from_campaign(campaign);
+    let spec = inputs.lidar.clone();
+    let grid = CellGrid::new(&spec);
+    let order: BTreeMap<&str, usize> = campaign
+        .recordings()
+        .iter()
+        .enumerate()
+        .map(|(i, r)| (r.id(), i))
+        .collect();
+    let clear_in: Vec<&RecordingInput> = inputs
+        .recordings
+        .iter()
+        .filter(|r| r.class == WeatherClass::Clear)
+        .collect();
+    if clear_in.is_empty() {
+        return Err(DiagnoseError::Campaign {
+            weather: weather.to_string(),
+            reason: "no clear recording was selected (rules and review): nothing to simulate from"
+                .into(),
+        });
+    }
+    let (reference, _) = build_reference(&inputs, &clear_in, &grid, params).map_err(fit_err)?;
+    // What pairing does to range and reflectivity in clear weather, per cell.
+    let offsets: Vec<Result<Vec<(u32, f64, f64)>, DiagnoseError>> = clear_in
+        .par_iter()
+        .map(|r| {
+            let (points, _) =
+                read_lidar(&r.lidar, &spec, &grid).map_err(|e| DiagnoseError::Read {
+                    path: r.lidar.clone(),
+                    reason: e.to_string(),
+                })?;
+            let (_, pairs) = pair_recording_detailed(&reference, &points, params);
+            Ok(pairs
+                .iter()
+                .map(|p| {
+                    let q = points[p.point as usize];
+                    let c = p.cell as usize;
+                    (
+                        p.cell,
+                        q.range as f64 - reference.range(c) as f64,
+                        log_ratio(q.reflectivity as f64, reference.reflectivity(c) as f64),
+                    )
+                })
+                .collect())
+        })
+        .collect();
+    let mut off = vec![(0.0f64, 0.0f64, 0u32); grid.cells()];
+    for o in offsets {
+        for (c, dr, dl) in o? {
+            let e = &mut off[c as usize];
+            e.0 += dr;
+            e.1 += dl;
+            e.2 += 1;
+        }
+    }
+    let az_bins = grid.azimuth_bins();
+    let az_res = 360.0 / az_bins as f64;
+    let mut cells = vec![None; grid.cells()];
+    for &c in reference.present() {
+        let c = c as usize;
+        let ring = (c / az_bins) as u16;
+        cells[c] = Some(CellInfo {
+            hits: reference.hits(c),
+            cov: PointCovariates {
+                range: reference.range(c) as f64,
+                reflectivity: reference.reflectivity(c) as f64,
+                ring,
+                elevation: spec.elevation_deg[ring as usize],
+                azimuth: ((c % az_bins) as f64 + 0.5) * az_res,
+            },
+            clear_range_offset: if off[c].2 > 0 {
+                off[c].0 / off[c].2 as f64
+            } else {
+                0.0
+            },
+            clear_log_reflectivity_offset: if off[c].2 > 0 {
+                off[c].1 / off[c].2 as f64
+            } else {
+                0.0
+            },
+        });
+    }
+    let clear: Vec<ClearRec> = clear_in
+        .iter()
+        .map(|r| ClearRec {
+            id: r.id.clone(),
+            order: order.get(r.id.as_str()).copied().unwrap_or(0),
+            lidar: r.lidar.clone(),
+        })
+        .collect();
+
+    let mut columns = vec!["mor".to_string(), "timestamp".to_string()];
+    columns.extend(campaign.columns().iter().map(|c| c.name.clone()));
+
+    let mut skipped = Vec::new();
+    let wanted: Vec<&RecordingInput> = inputs
+        .recordings
+        .iter()
+        .filter(|r| r.class == weather)
+        .filter(|r| match r.mor {
+            Some(m) if m.is_finite() && m > 0.0 => true,
+            _ => {
+                skipped.push((
+                    r.id.clone(),
+                    "no MOR from the visibility sensors (outage)".to_string(),
+                ));
+                false
+            }
+        })
+        .collect();
+    let recs: Vec<Result<Rec, DiagnoseError>> = wanted
+        .par_iter()
+        .map(|r| {
+            let (points, _) =
+                read_lidar(&r.lidar, &spec, &grid).map_err(|e| DiagnoseError::Read {
+                    path: r.lidar.clone(),
+                    reason: e.to_string(),
+                })?;
+            let (tally, pairs) = pair_recording_detailed(&reference, &points, params);
+            let mut occluded = vec![false; grid.cells()];
+            for &c in &tally.occluded {
+                occluded[c as usize] = true;
+            }
+            let units: Vec<Unit> = reference
+                .present()
+                .iter()
+                .filter(|&&c| !occluded[c as usize])
+                .map(|&c| Unit {
+                    cell: c,
+                    trials: reference.hits(c as usize),
+                    kept: tally.matched[c as usize],
+                })
+                .collect();
+            let kept = pairs
+                .iter()
+                .map(|p| {
+                    let q = points[p.point as usize];
+                    Kept {
+                        cell: p.cell,
+                        range: q.range,
+                        reflectivity: q.reflectivity,
+                    }
+                })
+                .collect();
+            let rec = campaign
+                .recording(&r.id)
+                .ok_or_else(|| DiagnoseError::Campaign {
+                    weather: weather.to_string(),
+                    reason: format!("recording {} vanished from the campaign", r.id),
+                })?;
+            let mut scan = BTreeMap::new();
+            scan.insert(
+                "timestamp".to_string(),
+                CovariateValue::Number(rec.timestamp().timestamp() as f64),
+            );
+            for (name, v) in rec.values() {
+                match v {
+                    Some(Cell::Numeric(x)) => {
+                        scan.insert(name.to_string(), CovariateValue::Number(*x));
+                    }
+                    Some(Cell::Categorical(t)) => {
+                        scan.insert(name.to_string(), CovariateValue::Text(t.clone()));
+                    }
+                    None => {}
+                }
+            }
+            let mor = r.mor.unwrap_or(f64::NAN);
+            scan.insert("mor".to_string(), CovariateValue::Number(mor));
+            let order_j = order.get(r.id.as_str()).copied().unwrap_or(0);
+            let nearest = clear
+                .iter()
+                .enumerate()
+                .min_by_key(|(_, c)| (c.order.abs_diff(order_j), c.order))
+                .map(|(i, _)| i)
+                .unwrap_or(0);
+            Ok(Rec {
+                id: r.id.clone(),
+                order: order_j,
+                mor,
+                scan,
+                lidar: r.lidar.clone(),
+                units,
+                kept,
+                near: (tally.ghosts.len() + tally.rings.len()) as u64,
+                clear: nearest,
+            })
+        })
+        .collect();
+    let recs = recs.into_iter().collect::<Result<Vec<_>, _>>()?;
+    Ok(Loaded {
+        weather,
+        spec,
+        reference,
+        cells,
+        clear,
+        recs,
+        columns,
+        inputs,
+        skipped,
+    })
+}

@@ -1,0 +1,401 @@
+//! What a model predicts for a measured recording, and how far off it is.
+//!
+//! Per held-out recording the model is built at the recording's MOR with
+//! every component the table holds (soft survival edge when fitted,
+//! near-range returns when the table has their laws, and any extension
+//! terms), then
+//!
+//! - **survival**: every reference cell's keep probability
+//!   ([`murk_infer::Applier::survival_probability`], unconditioned: the cell
+//!   is the reference, not one clear recording) against what was kept;
+//! - **range** and **intensity**: the predicted change of each kept return
+//!   (none for the baseline; the extension's bias or factor) against the
+//!   measured range minus the reference range, and the log ratio of the
+//!   measured to the reference reflectivity, both less what pairing alone
+//!   gives the same cell in clear weather;
+//! - **count** and the scene: the recording is *simulated* with murk-infer
+//!   from the nearest clear recording (`sims` seeded draws), the simulation
+//!   is classified by the same pairing as the measurement, and its ghost and
+//!   ring returns are counted; the simulated clouds are compared with the
+//!   measured one by [`crate::scene::SceneMetrics`].
+
+use std::collections::BTreeMap;
+
+use murk_fit::FitValidParams;
+use murk_fit::pairing::pair_recording;
+use murk_fit::reference::cell_points;
+use murk_infer::{Applier, ApplyParams, Severity};
+use murk_types::{
+    CoefficientTable, CovariateValue, ExtensionObservable, PointCloud, PointCovariates,
+    combine_extensions,
+};
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::DiagnoseError;
+use crate::data::{Loaded, Rec, log_ratio, read_calibrated};
+use crate::scene::{SceneMetrics, VoxelBox};
+
+/// Keep probabilities are clipped into `[P_FLOOR, 1 − P_FLOOR]` for the log
+/// loss (a hard threshold predicts 0 and 1).
+pub const P_FLOOR: f64 = 1e-3;
+
+/// Options of the simulation half.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SimOptions {
+    /// Seeded simulations per recording.
+    pub sims: usize,
+    /// Voxel size, metres.
+    pub voxel_m: f64,
+    /// Box of the localised difference.
+    pub local_box: Option<VoxelBox>,
+    /// Master seed.
+    pub seed: u64,
+}
+
+/// One recording evaluated under one model.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecEval {
+    /// Index into `Loaded::recs`.
+    pub rec: usize,
+    /// Keep probability per survival unit (aligned with `Rec::units`).
+    pub p: Vec<f64>,
+    /// Range residual per kept return, metres (aligned with `Rec::kept`).
+    pub range_residual: Vec<f64>,
+    /// Intensity log-ratio residual per kept return.
+    pub intensity_residual: Vec<f64>,
+    /// Mean ghost + ring count of the simulations (`None` without them).
+    pub near_sim: Option<f64>,
+    /// Mean scene metrics of the simulations.
+    pub scene: Option<SceneMetrics>,
+}
+
+impl RecEval {
+    /// Survival residuals `kept/trials − p` with their weights.
+    pub fn survival_residuals<'a>(&'a self, rec: &'a Rec) -> impl Iterator<Item = (f64, f64)> + 'a {
+        rec.units
+            .iter()
+            .zip(&self.p)
+            .map(|(u, p)| (u.kept as f64 / u.trials as f64 - p, u.trials as f64))
+    }
+
+    /// The count residual `ln((N_obs + 1) / (N_sim + 1))`.
+    pub fn count_residual(&self, rec: &Rec) -> Option<f64> {
+        self.near_sim
+            .map(|s| ((rec.near as f64 + 1.0) / (s + 1.0)).ln())
+    }
+}
+
+/// True when the table's weather can use the soft edge.
+pub fn has_soft_edge(table: &CoefficientTable, loaded: &Loaded) -> bool {
+    table.weathers.get(&loaded.weather).is_some_and(|w| {
+        w.survival.is_some()
+            && w.vanishing_slope
+                .iter()
+                .all(|b| b.edge_width.is_some_and(|e| e.is_finite() && e > 0.0))
+    })
+}
+
+/// The applier of `table` at `rec`'s MOR with every component the table
+/// holds.
+pub fn applier(
+    table: &CoefficientTable,
+    loaded: &Loaded,
+    rec: &Rec,
+    near: bool,
+    seed: u64,
+) -> Result<Applier, DiagnoseError> {
+    let w = table.weathers.get(&loaded.weather);
+    let has_near = near && w.is_some_and(|w| w.ghost.is_some() || w.ring.is_some());
+    let mut p = ApplyParams::new(loaded.weather, Severity::Mor(rec.mor))
+        .soft_edge(has_soft_edge(table, loaded))
+        .near_range(has_near)
+        .lidar(loaded.spec.clone())
+        .seed(seed);
+    for (k, v) in &rec.scan {
+        p = p.covariate(k.clone(), v.clone());
+    }
+    p.build(table).map_err(|e| DiagnoseError::Infer {
+        what: format!("recording {}", rec.id),
+        source: e,
+    })
+}
+
+/// The combined extension value of `table` on `obs` for a point of a
+/// recording.
+pub fn extension_value(
+    table: &CoefficientTable,
+    loaded: &Loaded,
+    obs: ExtensionObservable,
+    point: &PointCovariates,
+    scan: &BTreeMap<String, CovariateValue>,
+    mor: f64,
+) -> f64 {
+    let terms = table
+        .weathers
+        .get(&loaded.weather)
+        .map(|w| w.extensions.as_slice())
+        .unwrap_or(&[]);
+    combine_extensions(
+        obs,
+        terms
+            .iter()
+            .filter(|t| t.observable == obs)
+            .map(|t| t.value(Some(point), scan, mor)),
+    )
+}
+
+/// Evaluates the recordings `which` (indices into `loaded.recs`) under
+/// `table`; simulates them when `sim` is given.
+pub fn evaluate(
+    loaded: &Loaded,
+    table: &CoefficientTable,
+    which: &[usize],
+    sim: Option<&SimOptions>,
+    fit_params: &FitValidParams,
+) -> Result<Vec<RecEval>, DiagnoseError> {
+    let results: Vec<Result<RecEval, DiagnoseError>> = which
+        .par_iter()
+        .map(|&j| evaluate_one(loaded, table, j, sim, fit_params))
+        .collect();
+    results.into_iter().collect()
+}
+
+fn evaluate_one(
+    loaded: &Loaded,
+    table: &CoefficientTable,
+    j: usize,
+    sim: Option<&SimOptions>,
+    fit_params: &FitValidParams,
+) -> Result<RecEval, DiagnoseError> {
+    let rec = &loaded.recs[j];
+    let seed = sim.map_or(0, |s| s.seed);
+    let ap = applier(table, loaded, rec, sim.is_some(), seed)?;
+    let cell = |c: u32| loaded.cells[c as usize].expect("units and pairs are reference cells");
+    let p = rec
+        .units
+        .iter()
+        .map(|u| {
+            let c = cell(u.cell);
+            let f = extension_value(
+                table,
+                loaded,
+                ExtensionObservable::Survival,
+                &c.cov,
+                &rec.scan,
+                rec.mor,
+            );
+            ap.survival_probability(c.cov.range, c.cov.reflectivity, f, false)
+        })
+        .collect();
+    let mut range_residual = Vec::with_capacity(rec.kept.len());
+    let mut intensity_residual = Vec::with_capacity(rec.kept.len());
+    for k in &rec.kept {
+        let c = cell(k.cell);
+        let bias = extension_value(
+            table,
+            loaded,
+            ExtensionObservable::Range,
+            &c.cov,
+            &rec.scan,
+            rec.mor,
+        );
+        let fac = extension_value(
+            table,
+            loaded,
+            ExtensionObservable::Intensity,
+            &c.cov,
+            &rec.scan,
+            rec.mor,
+        );
+        range_residual.push(k.range as f64 - c.cov.range - c.clear_range_offset - bias);
+        intensity_residual.push(
+            log_ratio(k.reflectivity as f64, c.cov.reflectivity)
+                - c.clear_log_reflectivity_offset
+                - fac.max(1e-6).ln(),
+        );
+    }
+    let (near_sim, scene) = match sim {
+        None => (None, None),
+        Some(opts) => {
+            let (n, s) = simulate(loaded, rec, &ap, opts, fit_params)?;
+            (Some(n), Some(s))
+        }
+    };
+    Ok(RecEval {
+        rec: j,
+        p,
+        range_residual,
+        intensity_residual,
+        near_sim,
+        scene,
+    })
+}
+
+/// Points of a cloud as `[x, y, z]`.
+pub fn xyz(cloud: &PointCloud) -> Vec<[f32; 3]> {
+    (0..cloud.len())
+        .map(|i| [cloud.x[i], cloud.y[i], cloud.z[i]])
+        .collect()
+}
+
+/// Simulates `rec` from its nearest clear recording `opts.sims` times:
+/// the mean ghost + ring count (classified by the fit's pairing) and the
+/// mean scene metrics against the measured cloud.
+fn simulate(
+    loaded: &Loaded,
+    rec: &Rec,
+    ap: &Applier,
+    opts: &SimOptions,
+    fit_params: &FitValidParams,
+) -> Result<(f64, SceneMetrics), DiagnoseError> {
+    let clear_rec = &loaded.clear[rec.clear];
+    let clear = read_calibrated(&clear_rec.lidar, &loaded.spec)?;
+    let measured = xyz(&read_calibrated(&rec.lidar, &loaded.spec)?);
+    let grid = loaded.reference.grid();
+    let mut near = 0.0;
+    let mut acc = SceneMetrics {
+        voxel_global_difference: 0.0,
+        voxel_difference: 0.0,
+        voxel_local_difference: opts.local_box.map(|_| 0.0),
+        chamfer_m: 0.0,
+    };
+    let n = opts.sims.max(1);
+    for s in 0..n {
+        let key = format!("{}#{s}", rec.id);
+        let (out, _) = ap.apply(&clear, &key).map_err(|e| DiagnoseError::Infer {
+            what: format!("recording {}", rec.id),
+            source: e,
+        })?;
+        let pts = cell_points(grid, &out, &clear_rec.lidar).map_err(|e| DiagnoseError::Read {
+            path: clear_rec.lidar.clone(),
+            reason: e.to_string(),
+        })?;
+        let t = pair_recording(&loaded.reference, &pts, fit_params);
+        near += (t.ghosts.len() + t.rings.len()) as f64;
+        let m = SceneMetrics::compare(&measured, &xyz(&out), opts.voxel_m, opts.local_box.as_ref());
+        acc.voxel_global_difference += m.voxel_global_difference;
+        acc.voxel_difference += m.voxel_difference;
+        acc.chamfer_m += m.chamfer_m;
+        acc.voxel_local_difference = match (acc.voxel_local_difference, m.voxel_local_difference) {
+            (Some(a), Some(b)) => Some(a + b),
+            _ => None,
+        };
+    }
+    let k = n as f64;
+    acc.voxel_global_difference /= k;
+    acc.voxel_difference /= k;
+    acc.chamfer_m /= k;
+    acc.voxel_local_difference = acc.voxel_local_difference.map(|v| v / k);
+    Ok((near / k, acc))
+}
+
+/// Metrics over a set of evaluated recordings (the report's `metrics`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Metrics {
+    /// Recordings.
+    pub recordings: usize,
+    /// Mean log loss per expected return (natural log).
+    pub survival_log_loss: f64,
+    /// Mean over recordings of |predicted − measured| no-change rate.
+    pub no_change_rate_error: f64,
+    /// Mean over recordings of |ln((N_obs + 1)/(N_sim + 1))| of ghost and
+    /// ring counts.
+    pub count_abs_log_error: Option<f64>,
+    /// Mean range residual of kept returns, metres.
+    pub range_bias_m: f64,
+    /// RMS range residual of kept returns, metres.
+    pub range_rmse_m: f64,
+    /// Mean log ratio of measured to predicted reflectivity of kept returns.
+    pub intensity_bias: f64,
+    /// RMS of that log ratio.
+    pub intensity_rmse: f64,
+    /// Seed 004 eq. 6, mean over recordings.
+    pub voxel_global_difference: Option<f64>,
+    /// Bounded per-voxel difference, mean over recordings.
+    pub voxel_difference: Option<f64>,
+    /// Seed 004 eq. 8 in the box given, mean over recordings.
+    pub voxel_local_difference: Option<f64>,
+    /// Chamfer distance, metres, mean over recordings.
+    pub chamfer_m: Option<f64>,
+}
+
+impl Metrics {
+    /// Aggregates `evals` of `loaded`'s recordings.
+    pub fn of(loaded: &Loaded, evals: &[RecEval]) -> Metrics {
+        let mut ll = 0.0;
+        let mut trials = 0.0;
+        let mut ncr = 0.0;
+        let (mut rs, mut rs2, mut is, mut is2, mut nk) = (0.0f64, 0.0f64, 0.0f64, 0.0f64, 0.0f64);
+        let mut count = Vec::new();
+        let mut scenes = Vec::new();
+        for e in evals {
+            let rec = &loaded.recs[e.rec];
+            let (mut pk, mut ok, mut tr) = (0.0, 0.0, 0.0);
+            for (u, &p) in rec.units.iter().zip(&e.p) {
+                let p = p.clamp(P_FLOOR, 1.0 - P_FLOOR);
+                let (k, n) = (u.kept as f64, u.trials as f64);
+                ll -= k * p.ln() + (n - k) * (1.0 - p).ln();
+                pk += p * n;
+                ok += k;
+                tr += n;
+            }
+            trials += tr;
+            if tr > 0.0 {
+                ncr += (pk - ok).abs() / tr;
+            }
+            for (&r, &i) in e.range_residual.iter().zip(&e.intensity_residual) {
+                rs += r;
+                rs2 += r * r;
+                is += i;
+                is2 += i * i;
+                nk += 1.0;
+            }
+            if let Some(c) = e.count_residual(rec) {
+                count.push(c.abs());
+            }
+            if let Some(s) = e.scene {
+                scenes.push(s);
+            }
+        }
+        let n = evals.len().max(1) as f64;
+        let mean = |v: Vec<f64>| (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64);
+        Metrics {
+            recordings: evals.len(),
+            survival_log_loss: ll / trials.max(1.0),
+            no_change_rate_error: ncr / n,
+            count_abs_log_error: mean(count),
+            range_bias_m: rs / nk.max(1.0),
+            range_rmse_m: (rs2 / nk.max(1.0)).sqrt(),
+            intensity_bias: is / nk.max(1.0),
+            intensity_rmse: (is2 / nk.max(1.0)).sqrt(),
+            voxel_global_difference: mean(
+                scenes.iter().map(|s| s.voxel_global_difference).collect(),
+            ),
+            voxel_difference: mean(scenes.iter().map(|s| s.voxel_difference).collect()),
+            voxel_local_difference: mean(
+                scenes
+                    .iter()
+                    .filter_map(|s| s.voxel_local_difference)
+                    .collect(),
+            ),
+            chamfer_m: mean(
+                scenes
+                    .iter()
+                    .map(|s| s.chamfer_m)
+                    .filter(|c| c.is_finite())
+                    .collect(),
+            ),
+        }
+    }
+
+    /// The metric that measures `observable`.
+    pub fn of_observable(&self, obs: ExtensionObservable) -> (&'static str, Option<f64>) {
+        match obs {
+            ExtensionObservable::Survival => ("survival_log_loss", Some(self.survival_log_loss)),
+            ExtensionObservable::Count => ("count_abs_log_error", self.count_abs_log_error),
+            ExtensionObservable::Range => ("range_rmse_m", Some(self.range_rmse_m)),
+            ExtensionObservable::Intensity => ("intensity_rmse", Some(self.intensity_rmse)),
+        }
+    }
+}

@@ -1,0 +1,820 @@
+//! murk-diagnose: what a fitted LiDAR weather model gets wrong against
+//! measured degraded recordings, why, and what extending it gains on
+//! recordings it was not fitted on.
+//!
+//! [`DiagnoseParams`] → [`DiagnoseParams::check`] → [`DiagnoseValidParams::run`]
+//! → a [`Diagnosis`] (the `weather-noise-diagnosis/1` report of
+//! `../shared/report-formats.md`, plus the extended table):
+//!
+//! 1. **Split** the weather's recordings into `folds` by recording
+//!    (deterministic from the seed). For each fold the baseline is fitted
+//!    (murk-fit) on the other folds and the clear recordings, or taken from a
+//!    given table.
+//! 2. **Simulate and compare** every held-out recording ([`evaluate`]):
+//!    survival (keep probability per reference cell), range and intensity of
+//!    kept returns, ghost/ring counts and the scene metrics ([`scene`]) of
+//!    murk-infer simulations from the nearest clear recording.
+//! 3. **Attribute** ([`attribution`]): each observable's held-out residual
+//!    against every point-level covariate (`range`, `reflectivity`, `ring`,
+//!    `elevation`, `azimuth`) and every scan-level one (`mor`, `timestamp`,
+//!    every `weather.csv` column, known or not), with permutation tests over
+//!    recordings, Holm's adjustment over all tests, and a relevance threshold
+//!    per observable ([`Relevance`]). A finding is *significant* only when
+//!    both hold. Covariates that only echo the top finding of their
+//!    observable (range and elevation on a static site, say) are re-tested on
+//!    the residual left after it, and marked explained when nothing remains.
+//! 4. **Extend** ([`extend`]): a piecewise-constant term along the top
+//!    finding's covariate, fitted on each fold's fit set, and
+//! 5. **re-simulate** the held-out recordings with it: the gain is measured on
+//!    held-out recordings only.
+//!
+//! ```no_run
+//! use murk_diagnose::DiagnoseParams;
+//! use murk_types::WeatherClass;
+//!
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! let campaign = murk_campaign::Campaign::open("fixtures/default-campaign")?;
+//! let d = DiagnoseParams::new(WeatherClass::Fog).folds(3).seed(1).check()?.run(&campaign)?;
+//! for f in d.report.findings.iter().filter(|f| f.significant) {
+//!     println!("{} vs {}: {}", f.observable, f.covariate, f.cause);
+//! }
+//! # Ok(())
+//! # }
+//! ```
+//!
+//! **Architecture invariant:** the diagnosis reads measured data through
+//! murk-fit's pairing and simulates through murk-infer's applier, so what it
+//! measures is what those tools do; it never re-implements either model.
+
+#![deny(missing_docs)]
+
+pub mod attribution;
+pub mod data;
+mod error;
+pub mod evaluate;
+pub mod extend;
+mod report;
+pub mod scene;
+
+use std::collections::BTreeMap;
+
+use murk_campaign::Campaign;
+use murk_fit::{FitParams, FitValidParams};
+use murk_types::{
+    CoefficientTable, CovariateValue, ExtensionObservable, POINT_COVARIATES, WeatherClass,
+};
+use rand::SeedableRng;
+use rand::rngs::ChaCha8Rng;
+use rand::seq::SliceRandom;
+use rayon::prelude::*;
+
+pub use error::DiagnoseError;
+pub use report::{DIAGNOSIS_FORMAT, Diagnosis, Extended, Finding, Gain, ModelMetrics, Report};
+
+use attribution::{Binning, TestOutcome, holm, point_test, scan_test};
+use data::Loaded;
+use evaluate::{Metrics, RecEval, SimOptions, evaluate};
+use scene::VoxelBox;
+
+/// The smallest effect worth reporting, per observable (residual units).
+///
+/// | observable | default | unit |
+/// |---|---|---|
+/// | survival | 0.02 | keep probability (2 percentage points) |
+/// | count | 0.10 | log ratio of counts (≈ 10 %) |
+/// | range | 0.02 | metres (a VLP-16 is specified to ±3 cm) |
+/// | intensity | 0.05 | log ratio of reflectivity (≈ 5 %) |
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Relevance {
+    /// Survival.
+    pub survival: f64,
+    /// Count.
+    pub count: f64,
+    /// Range, metres.
+    pub range: f64,
+    /// Intensity.
+    pub intensity: f64,
+}
+
+impl Default for Relevance {
+    fn default() -> Self {
+        Relevance {
+            survival: 0.02,
+            count: 0.10,
+            range: 0.02,
+            intensity: 0.05,
+        }
+    }
+}
+
+impl Relevance {
+    /// The threshold of `obs`.
+    pub fn of(&self, obs: ExtensionObservable) -> f64 {
+        match obs {
+            ExtensionObservable::Survival => self.survival,
+            ExtensionObservable::Count => self.count,
+            ExtensionObservable::Range => self.range,
+            ExtensionObservable::Intensity => self.intensity,
+        }
+    }
+}
+
+/// Hyperparameters of a diagnosis.
+///
+/// | name | default | purpose |
+/// |---|---|---|
+/// | `folds` | 3 | folds by recording (each recording is held out once) |
+/// | `seed` | 0 | fold split, permutations, simulations |
+/// | `permutations` | 1999 | null draws per test |
+/// | `alpha` | 0.05 | family-wise error rate (Holm over all tests) |
+/// | `relevance` | see [`Relevance`] | smallest effect that matters |
+/// | `sims` | 2 | simulations per held-out recording |
+/// | `voxel_m` | 1.0 | voxel size of the scene metrics |
+/// | `local_box` | none | box of the localised difference |
+/// | `coefficients` | none | a baseline table to use instead of fitting per fold |
+/// | `point_bins` | 12 | quantile bins of continuous point covariates |
+/// | `scan_bins` | 4 | quantile bins of continuous scan covariates |
+#[derive(Debug, Clone)]
+pub struct DiagnoseParams {
+    weather: WeatherClass,
+    folds: usize,
+    seed: u64,
+    permutations: usize,
+    alpha: f64,
+    relevance: Relevance,
+    sims: usize,
+    voxel_m: f64,
+    local_box: Option<VoxelBox>,
+    coefficients: Option<CoefficientTable>,
+    point_bins: usize,
+    scan_bins: usize,
+}
+
+/// Checked [`DiagnoseParams`].
+#[derive(Debug, Clone)]
+pub struct DiagnoseValidParams(DiagnoseParams);
+
+impl DiagnoseParams {
+    /// Defaults for `weather`.
+    pub fn new(weather: WeatherClass) -> Self {
+        DiagnoseParams {
+            weather,
+            folds: 3,
+            seed: 0,
+            permutations: 1999,
+            alpha: 0.05,
+            relevance: Relevance::default(),
+            sims: 2,
+            voxel_m: 1.0,
+            local_box: None,
+            coefficients: None,
+            point_bins: 12,
+            scan_bins: 4,
+        }
+    }
+    /// Folds by recording.
+    pub fn folds(mut self, k: usize) -> Self {
+        self.folds = k;
+        self
+    }
+    /// Master seed.
+    pub fn seed(mut self, s: u64) -> Self {
+        self.seed = s;
+        self
+    }
+    /// Null draws per test.
+    pub fn permutations(mut self, n: usize) -> Self {
+        self.permutations = n;
+        self
+    }
+    /// Family-wise error rate.
+    pub fn alpha(mut self, a: f64) -> Self {
+        self.alpha = a;
+        self
+    }
+    /// Relevance thresholds.
+    pub fn relevance(mut self, r: Relevance) -> Self {
+        self.relevance = r;
+        self
+    }
+    /// Simulations per held-out recording.
+    pub fn sims(mut self, n: usize) -> Self {
+        self.sims = n;
+        self
+    }
+    /// Voxel size, metres.
+    pub fn voxel_m(mut self, v: f64) -> Self {
+        self.voxel_m = v;
+        self
+    }
+    /// Box of the localised voxel difference.
+    pub fn local_box(mut self, b: Option<VoxelBox>) -> Self {
+        self.local_box = b;
+        self
+    }
+    /// A baseline table to use for every fold instead of fitting.
+    pub fn coefficients(mut self, t: Option<CoefficientTable>) -> Self {
+        self.coefficients = t;
+        self
+    }
+    /// Quantile bins of continuous point covariates.
+    pub fn point_bins(mut self, n: usize) -> Self {
+        self.point_bins = n;
+        self
+    }
+    /// Quantile bins of continuous scan covariates.
+    pub fn scan_bins(mut self, n: usize) -> Self {
+        self.scan_bins = n;
+        self
+    }
+
+    /// Checks the parameters.
+    pub fn check(self) -> Result<DiagnoseValidParams, DiagnoseError> {
+        let bad = |name, value: String, reason: &str| {
+            Err(DiagnoseError::InvalidParam {
+                name,
+                value,
+                reason: reason.into(),
+            })
+        };
+        if self.weather == WeatherClass::Clear {
+            return bad(
+                "weather",
+                "clear".into(),
+                "clear is the reference; choose fog, rain or snow",
+            );
+        }
+        if self.folds < 2 {
+            return bad(
+                "folds",
+                self.folds.to_string(),
+                "need ≥ 2 to hold recordings out",
+            );
+        }
+        if self.permutations < 99 {
+            return bad("permutations", self.permutations.to_string(), "need ≥ 99");
+        }
+        if !(self.alpha > 0.0 && self.alpha < 1.0) {
+            return bad("alpha", self.alpha.to_string(), "must be in (0, 1)");
+        }
+        if !(self.voxel_m.is_finite() && self.voxel_m > 0.0) {
+            return bad("voxel_m", self.voxel_m.to_string(), "must be > 0");
+        }
+        if self.sims == 0 {
+            return bad("sims", "0".into(), "need ≥ 1 simulation per recording");
+        }
+        if self.point_bins < 2 || self.scan_bins < 2 {
+            return bad(
+                "point_bins/scan_bins",
+                format!("{}/{}", self.point_bins, self.scan_bins),
+                "need ≥ 2",
+            );
+        }
+        let r = self.relevance;
+        if [r.survival, r.count, r.range, r.intensity]
+            .iter()
+            .any(|x| !(x.is_finite() && *x >= 0.0))
+        {
+            return bad(
+                "relevance",
+                format!("{r:?}"),
+                "thresholds must be finite and ≥ 0",
+            );
+        }
+        if let Some(t) = &self.coefficients {
+            t.validate()
+                .map_err(|e| DiagnoseError::Table(e.to_string()))?;
+            if !t.weathers.contains_key(&self.weather) {
+                return Err(DiagnoseError::Table(format!(
+                    "the table has no {} model",
+                    self.weather
+                )));
+            }
+        }
+        Ok(DiagnoseValidParams(self))
+    }
+}
+
+/// Fewest recordings of the weather a diagnosis accepts.
+pub const MIN_RECORDINGS: usize = 4;
+
+/// One test's identity and outcome.
+#[derive(Debug, Clone)]
+struct Test {
+    observable: ExtensionObservable,
+    covariate: String,
+    point_level: bool,
+    binning: Binning,
+    outcome: TestOutcome,
+}
+
+/// Residual units of the held-out set, per observable.
+struct Residuals {
+    /// (recording index into the pooled list, point covariates, residual, weight).
+    points: BTreeMap<ExtensionObservable, Vec<(usize, murk_types::PointCovariates, f64, f64)>>,
+    /// Per recording (pooled order): recording-level residual per observable.
+    scans: BTreeMap<ExtensionObservable, Vec<Option<f64>>>,
+}
+
+fn residuals(loaded: &Loaded, evals: &[RecEval]) -> Residuals {
+    use ExtensionObservable::*;
+    let mut points: BTreeMap<_, Vec<_>> = BTreeMap::new();
+    let mut scans: BTreeMap<_, Vec<Option<f64>>> = BTreeMap::new();
+    for (i, e) in evals.iter().enumerate() {
+        let rec = &loaded.recs[e.rec];
+        let cell = |c: u32| loaded.cells[c as usize].expect("reference cell").cov;
+        let sv = points.entry(Survival).or_default();
+        let (mut s, mut w) = (0.0, 0.0);
+        for (u, (r, wt)) in rec.units.iter().zip(e.survival_residuals(rec)) {
+            sv.push((i, cell(u.cell), r, wt));
+            s += r * wt;
+            w += wt;
+        }
+        scans
+            .entry(Survival)
+            .or_default()
+            .push((w > 0.0).then(|| s / w));
+        for (obs, res) in [
+            (Range, &e.range_residual),
+            (Intensity, &e.intensity_residual),
+        ] {
+            let v = points.entry(obs).or_default();
+            for (k, r) in rec.kept.iter().zip(res) {
+                v.push((i, cell(k.cell), *r, 1.0));
+            }
+            let m = (!res.is_empty()).then(|| res.iter().sum::<f64>() / res.len() as f64);
+            scans.entry(obs).or_default().push(m);
+        }
+        scans.entry(Count).or_default().push(e.count_residual(rec));
+    }
+    Residuals { points, scans }
+}
+
+fn seed_of(seed: u64, parts: &[&str]) -> u64 {
+    use sha2::{Digest, Sha256};
+    let mut h = Sha256::new();
+    h.update(seed.to_le_bytes());
+    for p in parts {
+        h.update(p.as_bytes());
+        h.update([0]);
+    }
+    let d = h.finalize();
+    u64::from_le_bytes(d[..8].try_into().expect("8 bytes"))
+}
+
+impl DiagnoseValidParams {
+    fn fit_params(&self) -> Result<FitValidParams, DiagnoseError> {
+        FitParams::default()
+            .bootstrap_replicates(0)
+            .seed(self.0.seed)
+            .check()
+            .map_err(|e| DiagnoseError::Fit {
+                what: "parameters".into(),
+                source: e,
+            })
+    }
+
+    /// Runs the diagnosis on `campaign`.
+    pub fn run(&self, campaign: &Campaign) -> Result<Diagnosis, DiagnoseError> {
+        let p = &self.0;
+        let fit_params = self.fit_params()?;
+        let loaded = data::load(campaign, p.weather, &fit_params)?;
+        let n = loaded.recs.len();
+        if n < MIN_RECORDINGS {
+            return Err(DiagnoseError::Campaign {
+                weather: p.weather.to_string(),
+                reason: format!(
+                    "{n} recordings of this weather were selected (with a MOR); a diagnosis needs ≥ {MIN_RECORDINGS} to hold some out"
+                ),
+            });
+        }
+        // Folds.
+        let k = p.folds.min(n);
+        let mut order: Vec<usize> = (0..n).collect();
+        order.shuffle(&mut ChaCha8Rng::seed_from_u64(seed_of(p.seed, &["folds"])));
+        let mut fold_of = vec![0; n];
+        for (pos, &j) in order.iter().enumerate() {
+            fold_of[j] = pos % k;
+        }
+        let sim = SimOptions {
+            sims: p.sims,
+            voxel_m: p.voxel_m,
+            local_box: p.local_box,
+            seed: seed_of(p.seed, &["simulate"]),
+        };
+        // Baseline per fold, held-out evaluation.
+        let mut tables = Vec::with_capacity(k);
+        let mut held: Vec<Vec<usize>> = Vec::with_capacity(k);
+        let mut baseline_evals: Vec<RecEval> = Vec::with_capacity(n);
+        for f in 0..k {
+            let out: Vec<usize> = (0..n).filter(|&j| fold_of[j] == f).collect();
+            let table = match &p.coefficients {
+                Some(t) => t.clone(),
+                None => self.fit_on(
+                    &loaded,
+                    &(0..n).filter(|&j| fold_of[j] != f).collect::<Vec<_>>(),
+                    &fit_params,
+                    &format!("fold {}", f + 1),
+                )?,
+            };
+            baseline_evals.extend(evaluate(&loaded, &table, &out, Some(&sim), &fit_params)?);
+            tables.push(table);
+            held.push(out);
+        }
+        baseline_evals.sort_by_key(|e| e.rec);
+        let baseline_metrics = Metrics::of(&loaded, &baseline_evals);
+
+        // Attribution.
+        let res = residuals(&loaded, &baseline_evals);
+        let mut tests = self.tests(&loaded, &baseline_evals, &res);
+        let pvals: Vec<f64> = tests.iter().map(|t| t.outcome.p_value).collect();
+        let adjusted = holm(&pvals);
+        let mut findings: Vec<Finding> = tests
+            .iter()
+            .zip(&adjusted)
+            .map(|(t, &padj)| {
+                let threshold = p.relevance.of(t.observable);
+                let strength = if threshold > 0.0 {
+                    t.outcome.strength / threshold
+                } else {
+                    t.outcome.strength
+                };
+                Finding {
+                    observable: t.observable.name().to_string(),
+                    covariate: t.covariate.clone(),
+                    strength,
+                    significant: padj < p.alpha && t.outcome.strength >= threshold,
+                    cause: String::new(),
+                    level: if t.point_level { "point" } else { "scan" }.to_string(),
+                    effect: t.outcome.strength,
+                    relevance_threshold: threshold,
+                    p_value: t.outcome.p_value,
+                    p_adjusted: padj,
+                    recordings: t.outcome.recordings,
+                    explained_by: None,
+                    profile: t.outcome.profile.clone(),
+                }
+            })
+            .collect();
+        // Covariates echoing the top finding of their observable.
+        self.explain_away(&loaded, &baseline_evals, &res, &mut tests, &mut findings);
+        for (f, t) in findings.iter_mut().zip(&tests) {
+            f.cause = report::cause(f, t.observable, p.weather);
+        }
+        let mut idx: Vec<usize> = (0..findings.len()).collect();
+        idx.sort_by(|&a, &b| {
+            findings[b]
+                .significant
+                .cmp(&findings[a].significant)
+                .then(findings[b].strength.total_cmp(&findings[a].strength))
+                .then(a.cmp(&b))
+        });
+        let top = idx.first().copied().filter(|&i| findings[i].significant);
+
+        // Extension.
+        let (extended, gain, extended_table) = match top {
+            None => (None, None, None),
+            Some(i) => {
+                let t = &tests[i];
+                let mut ext_evals = Vec::with_capacity(n);
+                for f in 0..k {
+                    let fit_set: Vec<usize> = (0..n).filter(|&j| fold_of[j] != f).collect();
+                    let in_sample = evaluate(
+                        &loaded,
+                        &tables[f],
+                        &fit_set,
+                        (t.observable == ExtensionObservable::Count).then_some(&sim),
+                        &fit_params,
+                    )?;
+                    let binning = self.extension_binning(&loaded, &fit_set, t);
+                    let term = extend::fit_term(
+                        &loaded,
+                        &tables[f],
+                        &in_sample,
+                        t.observable,
+                        &t.covariate,
+                        &binning,
+                    )?;
+                    let mut ext = tables[f].clone();
+                    if let Some(w) = ext.weathers.get_mut(&p.weather) {
+                        w.extensions.push(term);
+                    }
+                    ext_evals.extend(evaluate(&loaded, &ext, &held[f], Some(&sim), &fit_params)?);
+                }
+                ext_evals.sort_by_key(|e| e.rec);
+                let ext_metrics = Metrics::of(&loaded, &ext_evals);
+                // The table to publish: the term fitted on every recording.
+                let all: Vec<usize> = (0..n).collect();
+                let full = match &p.coefficients {
+                    Some(t) => t.clone(),
+                    None => self.fit_on(&loaded, &all, &fit_params, "all recordings")?,
+                };
+                let in_sample = evaluate(
+                    &loaded,
+                    &full,
+                    &all,
+                    (t.observable == ExtensionObservable::Count).then_some(&sim),
+                    &fit_params,
+                )?;
+                let binning = self.extension_binning(&loaded, &all, t);
+                let term = extend::fit_term(
+                    &loaded,
+                    &full,
+                    &in_sample,
+                    t.observable,
+                    &t.covariate,
+                    &binning,
+                )?;
+                let mut ext_table = full;
+                if let Some(w) = ext_table.weathers.get_mut(&p.weather) {
+                    w.extensions.push(term.clone());
+                }
+                let (metric, before) = baseline_metrics.of_observable(t.observable);
+                let (_, after) = ext_metrics.of_observable(t.observable);
+                let gain = match (before, after) {
+                    (Some(b), Some(a)) if b > 0.0 => Some(Gain {
+                        metric: metric.to_string(),
+                        before: b,
+                        after: a,
+                        relative: (b - a) / b,
+                    }),
+                    _ => None,
+                };
+                let scene_gain = match (
+                    baseline_metrics.voxel_global_difference,
+                    ext_metrics.voxel_global_difference,
+                ) {
+                    (Some(b), Some(a)) if b > 0.0 => Some(Gain {
+                        metric: "voxel_global_difference".into(),
+                        before: b,
+                        after: a,
+                        relative: (b - a) / b,
+                    }),
+                    _ => None,
+                };
+                (
+                    Some(Extended {
+                        term: format!(
+                            "{} × f({}) — piecewise constant over {} bins, fitted per fold on the fit set",
+                            match t.observable {
+                                ExtensionObservable::Survival => "vanishing distance",
+                                ExtensionObservable::Count => "expected ghost and ring count",
+                                ExtensionObservable::Range => "range of kept returns +",
+                                ExtensionObservable::Intensity => "reflectivity of kept returns",
+                            },
+                            t.covariate,
+                            binning.len()
+                        ),
+                        extension: term,
+                        metrics: ext_metrics,
+                        scene_gain,
+                    }),
+                    gain,
+                    Some(ext_table),
+                )
+            }
+        };
+
+        let ordered: Vec<Finding> = idx.iter().map(|&i| findings[i].clone()).collect();
+        let report = Report {
+            format: DIAGNOSIS_FORMAT.to_string(),
+            weather: p.weather.to_string(),
+            heldout_recordings: n,
+            folds: k,
+            seed: p.seed,
+            skipped: loaded
+                .skipped
+                .iter()
+                .map(|(id, why)| format!("{id}: {why}"))
+                .collect(),
+            method: report::method_text(p.permutations, p.alpha, &p.relevance),
+            baseline: ModelMetrics {
+                source: if p.coefficients.is_some() {
+                    "the coefficient table given".into()
+                } else {
+                    format!("murk fit per fold on the other {} folds", k - 1)
+                },
+                metrics: baseline_metrics,
+            },
+            findings: ordered,
+            extended,
+            gain,
+        };
+        Ok(Diagnosis {
+            report,
+            extended_table,
+            figures: report::FigureData::new(&loaded, &tables[fold_of[0]], 0, sim.seed)?,
+        })
+    }
+
+    /// Fits the baseline on the clear recordings and the weather's
+    /// recordings `which`.
+    fn fit_on(
+        &self,
+        loaded: &Loaded,
+        which: &[usize],
+        params: &FitValidParams,
+        what: &str,
+    ) -> Result<CoefficientTable, DiagnoseError> {
+        let ids: std::collections::BTreeSet<&str> =
+            which.iter().map(|&j| loaded.recs[j].id.as_str()).collect();
+        let mut inputs = loaded.inputs.clone();
+        inputs.recordings.retain(|r| {
+            r.class == WeatherClass::Clear
+                || (r.class == loaded.weather && ids.contains(r.id.as_str()))
+        });
+        let fitted = params.fit_inputs(&inputs).map_err(|e| DiagnoseError::Fit {
+            what: what.to_string(),
+            source: e,
+        })?;
+        let table = fitted.table().clone();
+        if !table.weathers.contains_key(&loaded.weather) {
+            return Err(DiagnoseError::Campaign {
+                weather: loaded.weather.to_string(),
+                reason: format!("the fit on {what} produced no model for it"),
+            });
+        }
+        Ok(table)
+    }
+
+    /// Every (observable, covariate) test on the held-out residuals.
+    fn tests(&self, loaded: &Loaded, evals: &[RecEval], res: &Residuals) -> Vec<Test> {
+        let p = &self.0;
+        let nrec = evals.len();
+        let mut specs: Vec<(ExtensionObservable, String, bool)> = Vec::new();
+        for obs in [
+            ExtensionObservable::Survival,
+            ExtensionObservable::Count,
+            ExtensionObservable::Range,
+            ExtensionObservable::Intensity,
+        ] {
+            if obs != ExtensionObservable::Count {
+                for c in POINT_COVARIATES {
+                    specs.push((obs, c.to_string(), true));
+                }
+            }
+            for c in &loaded.columns {
+                specs.push((obs, c.clone(), false));
+            }
+        }
+        specs
+            .par_iter()
+            .filter_map(|(obs, cov, point)| {
+                let seed = seed_of(p.seed, &["test", obs.name(), cov]);
+                if *point {
+                    let units: Vec<(usize, f64, f64, f64)> = res
+                        .points
+                        .get(obs)?
+                        .iter()
+                        .filter_map(|(r, pc, e, w)| pc.get(cov).map(|x| (*r, x, *e, *w)))
+                        .collect();
+                    let xs: Vec<f64> = units.iter().map(|u| u.1).collect();
+                    let binning = Binning::numeric(&xs, p.point_bins);
+                    if binning.len() < 2 {
+                        return None;
+                    }
+                    let outcome = point_test(&units, nrec, &binning, p.permutations, seed);
+                    Some(Test {
+                        observable: *obs,
+                        covariate: cov.clone(),
+                        point_level: true,
+                        binning,
+                        outcome,
+                    })
+                } else {
+                    let scan = res.scans.get(obs)?;
+                    let vals: Vec<(&CovariateValue, f64)> = evals
+                        .iter()
+                        .zip(scan)
+                        .filter_map(|(e, r)| Some((loaded.recs[e.rec].scan.get(cov)?, (*r)?)))
+                        .filter(|(_, r)| r.is_finite())
+                        .collect();
+                    if vals.len() < MIN_RECORDINGS {
+                        return None;
+                    }
+                    let vs: Vec<&CovariateValue> = vals.iter().map(|v| v.0).collect();
+                    let binning = Binning::scan(&vs, p.scan_bins);
+                    if binning.len() < 2 {
+                        return None;
+                    }
+                    let outcome = scan_test(&vals, &binning, p.permutations, seed);
+                    Some(Test {
+                        observable: *obs,
+                        covariate: cov.clone(),
+                        point_level: false,
+                        binning,
+                        outcome,
+                    })
+                }
+            })
+            .collect()
+    }
+
+    /// Re-tests every significant finding that is not the top one of its
+    /// observable on the residual left after the top one's profile; marks it
+    /// explained when it is no longer significant and relevant.
+    fn explain_away(
+        &self,
+        loaded: &Loaded,
+        evals: &[RecEval],
+        res: &Residuals,
+        tests: &mut [Test],
+        findings: &mut [Finding],
+    ) {
+        let p = &self.0;
+        let nrec = evals.len();
+        let m = tests.len() as f64;
+        for obs in [
+            ExtensionObservable::Survival,
+            ExtensionObservable::Count,
+            ExtensionObservable::Range,
+            ExtensionObservable::Intensity,
+        ] {
+            let Some(top) = (0..tests.len())
+                .filter(|&i| tests[i].observable == obs && findings[i].significant)
+                .max_by(|&a, &b| findings[a].strength.total_cmp(&findings[b].strength))
+            else {
+                continue;
+            };
+            let tt = tests[top].clone();
+            let profile_of = |bin: Option<usize>| -> f64 {
+                let Some(b) = bin else { return 0.0 };
+                let label = tt.binning.labels().get(b).cloned().unwrap_or_default();
+                tt.outcome
+                    .profile
+                    .iter()
+                    .find(|x| x.label == label)
+                    .map_or(0.0, |x| x.mean_residual)
+            };
+            // Residuals with the top profile removed.
+            let rec_cov = |r: usize| &loaded.recs[evals[r].rec].scan;
+            for i in 0..tests.len() {
+                if i == top || tests[i].observable != obs || !findings[i].significant {
+                    continue;
+                }
+                let seed = seed_of(p.seed, &["retest", obs.name(), &tests[i].covariate]);
+                let outcome = if tests[i].point_level {
+                    let Some(pts) = res.points.get(&obs) else {
+                        continue;
+                    };
+                    let units: Vec<(usize, f64, f64, f64)> = pts
+                        .iter()
+                        .filter_map(|(r, pc, e, w)| {
+                            let x = pc.get(&tests[i].covariate)?;
+                            let b = match pc.get(&tt.covariate) {
+                                Some(v) => tt.binning.of_number(v),
+                                None => rec_cov(*r)
+                                    .get(&tt.covariate)
+                                    .and_then(|v| tt.binning.of(v)),
+                            };
+                            Some((*r, x, e - profile_of(b), *w))
+                        })
+                        .collect();
+                    point_test(&units, nrec, &tests[i].binning, p.permutations, seed)
+                } else {
+                    let Some(scan) = res.scans.get(&obs) else {
+                        continue;
+                    };
+                    // A point-level top profile is centred within recordings:
+                    // it leaves recording means unchanged.
+                    let vals: Vec<(&CovariateValue, f64)> = (0..nrec)
+                        .filter_map(|r| {
+                            let v = rec_cov(r).get(&tests[i].covariate)?;
+                            let e = scan[r]?;
+                            let adj = if tt.point_level {
+                                0.0
+                            } else {
+                                profile_of(
+                                    rec_cov(r).get(&tt.covariate).and_then(|v| tt.binning.of(v)),
+                                )
+                            };
+                            Some((v, e - adj))
+                        })
+                        .collect();
+                    scan_test(&vals, &tests[i].binning, p.permutations, seed)
+                };
+                let threshold = p.relevance.of(obs);
+                let padj = (outcome.p_value * m).min(1.0);
+                if !(padj < p.alpha && outcome.strength >= threshold) {
+                    findings[i].significant = false;
+                    findings[i].explained_by = Some(tt.covariate.clone());
+                }
+            }
+        }
+    }
+
+    /// Bins of the extension term: the finding's own for point covariates;
+    /// for scan covariates, recomputed on the recordings the term is fitted
+    /// on.
+    fn extension_binning(&self, loaded: &Loaded, which: &[usize], t: &Test) -> Binning {
+        if t.point_level {
+            return t.binning.clone();
+        }
+        let vs: Vec<&CovariateValue> = which
+            .iter()
+            .filter_map(|&j| loaded.recs[j].scan.get(&t.covariate))
+            .collect();
+        let b = Binning::scan(&vs, self.0.scan_bins);
+        if b.len() >= 2 { b } else { t.binning.clone() }
+    }
+}

@@ -1,0 +1,266 @@
+//! The diagnosis report (`weather-noise-diagnosis/1`) and its plain-language
+//! causes.
+
+use murk_types::{CoefficientTable, ExtensionObservable, ModelExtension, WeatherClass};
+use serde::Serialize;
+
+use crate::DiagnoseError;
+use crate::Relevance;
+use crate::attribution::ProfileBin;
+use crate::data::{Loaded, read_calibrated};
+use crate::evaluate::{Metrics, applier, xyz};
+
+/// The report's format tag.
+pub const DIAGNOSIS_FORMAT: &str = "weather-noise-diagnosis/1";
+
+/// A model's held-out metrics.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ModelMetrics {
+    /// Where the model came from.
+    pub source: String,
+    /// The metrics.
+    pub metrics: Metrics,
+}
+
+/// One (observable, covariate) test.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Finding {
+    /// `survival`, `count`, `range` or `intensity`.
+    pub observable: String,
+    /// A point-level name, `mor`, `timestamp` or a `weather.csv` header.
+    pub covariate: String,
+    /// Effect size in multiples of the observable's relevance threshold.
+    pub strength: f64,
+    /// Significant after Holm's adjustment and at least as large as the
+    /// relevance threshold (and not explained by a stronger finding).
+    pub significant: bool,
+    /// Plain-language cause.
+    pub cause: String,
+    /// `point` or `scan`.
+    pub level: String,
+    /// Effect size in the residual's unit (RMS of the profile beyond chance).
+    pub effect: f64,
+    /// The observable's relevance threshold, same unit.
+    pub relevance_threshold: f64,
+    /// Permutation p-value.
+    pub p_value: f64,
+    /// Holm-adjusted p-value over all tests.
+    pub p_adjusted: f64,
+    /// Recordings with data.
+    pub recordings: usize,
+    /// The stronger covariate that explains this dependence, when re-testing
+    /// after removing it left nothing.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub explained_by: Option<String>,
+    /// Mean residual per bin of the covariate.
+    pub profile: Vec<ProfileBin>,
+}
+
+/// The extended model.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Extended {
+    /// The term, in words.
+    pub term: String,
+    /// The term fitted on every recording (as in the extended table).
+    pub extension: ModelExtension,
+    /// Held-out metrics with the term (fitted per fold on the fit set).
+    pub metrics: Metrics,
+    /// The scene-level gain (voxel global difference).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub scene_gain: Option<Gain>,
+}
+
+/// Held-out improvement.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Gain {
+    /// The metric.
+    pub metric: String,
+    /// Baseline value.
+    pub before: f64,
+    /// Extended value.
+    pub after: f64,
+    /// `(before − after) / before`.
+    pub relative: f64,
+}
+
+/// The report.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Report {
+    /// [`DIAGNOSIS_FORMAT`].
+    pub format: String,
+    /// The weather.
+    pub weather: String,
+    /// Recordings evaluated held-out (every recording, once).
+    pub heldout_recordings: usize,
+    /// Folds.
+    pub folds: usize,
+    /// Master seed.
+    pub seed: u64,
+    /// Recordings left out, with the reason.
+    pub skipped: Vec<String>,
+    /// How findings are tested, in words.
+    pub method: String,
+    /// The baseline's held-out metrics.
+    pub baseline: ModelMetrics,
+    /// Every test, significant first, strongest first.
+    pub findings: Vec<Finding>,
+    /// The extended model (null without a significant finding).
+    pub extended: Option<Extended>,
+    /// The gain on the top finding's own metric (null without extension).
+    pub gain: Option<Gain>,
+}
+
+impl Report {
+    /// The report as pretty JSON.
+    pub fn to_json(&self) -> String {
+        serde_json::to_string_pretty(self).expect("the report serialises")
+    }
+
+    /// The strongest significant finding.
+    pub fn top(&self) -> Option<&Finding> {
+        self.findings.iter().find(|f| f.significant)
+    }
+}
+
+/// Everything a diagnosis returns.
+#[derive(Debug, Clone)]
+pub struct Diagnosis {
+    /// The report.
+    pub report: Report,
+    /// The baseline fitted on every recording plus the extension term, when
+    /// there is one: a table `murk apply` uses.
+    pub extended_table: Option<CoefficientTable>,
+    /// Data of the figures.
+    pub figures: FigureData,
+}
+
+/// Data of the bird's-eye figure of one held-out recording.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FigureData {
+    /// Recording id.
+    pub recording: String,
+    /// The clear recording simulated from.
+    pub clear: Vec<[f32; 3]>,
+    /// The baseline simulation.
+    pub simulated: Vec<[f32; 3]>,
+    /// The measurement.
+    pub measured: Vec<[f32; 3]>,
+}
+
+impl FigureData {
+    /// Simulates recording `j` of `loaded` with `table`.
+    pub fn new(
+        loaded: &Loaded,
+        table: &CoefficientTable,
+        j: usize,
+        seed: u64,
+    ) -> Result<FigureData, DiagnoseError> {
+        let rec = &loaded.recs[j];
+        let clear = read_calibrated(&loaded.clear[rec.clear].lidar, &loaded.spec)?;
+        let ap = applier(table, loaded, rec, true, seed)?;
+        let (out, _) = ap
+            .apply(&clear, &format!("{}#figure", rec.id))
+            .map_err(|e| DiagnoseError::Infer {
+                what: format!("recording {}", rec.id),
+                source: e,
+            })?;
+        Ok(FigureData {
+            recording: rec.id.clone(),
+            clear: xyz(&clear),
+            simulated: xyz(&out),
+            measured: xyz(&read_calibrated(&rec.lidar, &loaded.spec)?),
+        })
+    }
+}
+
+/// The method, in words, for the report.
+pub fn method_text(permutations: usize, alpha: f64, r: &Relevance) -> String {
+    format!(
+        "Residual = measured − simulated on held-out recordings. Point-level covariates: residuals centred per recording, binned; null by flipping the sign of whole recordings ({permutations} draws). Scan-level covariates: one residual per recording, binned; null by shuffling the covariate across recordings ({permutations} draws). Strength = RMS of the binned profile beyond its null mean, over the relevance threshold (survival {} keep probability, count {} log ratio, range {} m, intensity {} log ratio). Significant = Holm-adjusted p < {alpha} over all tests and effect ≥ threshold; a weaker covariate of the same observable is re-tested after removing the strongest one's profile.",
+        r.survival, r.count, r.range, r.intensity
+    )
+}
+
+/// Direction of a numeric profile: slope sign of the residual against the
+/// covariate (`None` for categories or a flat profile).
+fn trend(f: &Finding) -> Option<f64> {
+    let pts: Vec<(f64, f64, f64)> = f
+        .profile
+        .iter()
+        .filter_map(|b| b.center.map(|c| (c, b.mean_residual, b.weight)))
+        .collect();
+    if pts.len() < 2 {
+        return None;
+    }
+    let w: f64 = pts.iter().map(|p| p.2).sum();
+    let mx = pts.iter().map(|p| p.0 * p.2).sum::<f64>() / w;
+    let my = pts.iter().map(|p| p.1 * p.2).sum::<f64>() / w;
+    let sxy: f64 = pts.iter().map(|p| p.2 * (p.0 - mx) * (p.1 - my)).sum();
+    let sxx: f64 = pts.iter().map(|p| p.2 * (p.0 - mx).powi(2)).sum();
+    (sxx > 0.0).then(|| sxy / sxx)
+}
+
+/// The plain-language cause of a finding.
+pub fn cause(f: &Finding, obs: ExtensionObservable, weather: WeatherClass) -> String {
+    if let Some(by) = &f.explained_by {
+        return format!(
+            "{} follows {:?} only as far as {:?} does: nothing is left after removing the {by:?} profile",
+            f.observable, f.covariate, by
+        );
+    }
+    if !f.significant {
+        return format!(
+            "no dependence of {} on {:?} beyond chance and the {} threshold",
+            f.observable, f.covariate, f.relevance_threshold
+        );
+    }
+    let slope = trend(f);
+    let rises = slope.map(|s| s > 0.0);
+    let low_high = {
+        let mut bins: Vec<&ProfileBin> = f.profile.iter().collect();
+        bins.sort_by(|a, b| a.mean_residual.total_cmp(&b.mean_residual));
+        match (bins.first(), bins.last()) {
+            (Some(lo), Some(hi)) => format!(
+                "lowest in {} ({:+.3}), highest in {} ({:+.3})",
+                lo.label, lo.mean_residual, hi.label, hi.mean_residual
+            ),
+            _ => String::new(),
+        }
+    };
+    let what = match obs {
+        ExtensionObservable::Survival => "returns survive",
+        ExtensionObservable::Count => "returns with no clear counterpart appear",
+        ExtensionObservable::Range => "kept returns' range shifts",
+        ExtensionObservable::Intensity => "kept returns' reflectivity changes",
+    };
+    let known = match (obs, f.covariate.as_str(), rises) {
+        (ExtensionObservable::Survival, "reflectivity", Some(true)) => Some(
+            "low-reflectivity returns drop first: the model's reflectivity bands are too coarse or their slopes too close".to_string(),
+        ),
+        (ExtensionObservable::Survival, "elevation" | "ring", _)
+            if matches!(weather, WeatherClass::Rain | WeatherClass::Snow) =>
+        {
+            Some("wet-road specular loss on ground rings: returns from the road surface vanish sooner than the model's slopes say".to_string())
+        }
+        (ExtensionObservable::Count, "mor", Some(false)) => Some(
+            "droplet backscatter near the sensor grows faster as visibility falls than the fitted count law".to_string(),
+        ),
+        (ExtensionObservable::Intensity, "range", Some(false)) => Some(
+            "two-way attenuation of intensity: reflectivity of kept returns falls with range through the weather".to_string(),
+        ),
+        _ => None,
+    };
+    let dep = format!(
+        "{what} differently from the model along {:?} ({}); {low_high}",
+        f.covariate,
+        match rises {
+            Some(true) => "the residual rises with it".to_string(),
+            Some(false) => "the residual falls with it".to_string(),
+            None => "by category".to_string(),
+        }
+    );
+    match known {
+        Some(k) => format!("{k} ({dep})"),
+        None => dep,
+    }
+}

@@ -1,0 +1,360 @@
+//! Model extensions: terms that `murk diagnose` adds to a fitted weather
+//! model along one covariate, and that `murk apply` uses.
+//!
+//! The baseline model of a weather (vanishing slopes, soft edge, near-range
+//! laws) knows range, reflectivity and MOR. An extension makes one part of it
+//! depend on one more variable, as a piecewise-constant function fitted on
+//! measured recordings:
+//!
+//! | observable | the function's value `f` is | neutral |
+//! |---|---|---|
+//! | `survival` | a factor on the vanishing distance: `D ← D·f` | 1 |
+//! | `count` | a factor on the expected ghost and ring counts per scan | 1 |
+//! | `range` | a bias added to the range of kept returns, metres | 0 |
+//! | `intensity` | a factor on the reflectivity of kept returns | 1 |
+//!
+//! The covariate is a point-level name ([`POINT_COVARIATES`]: the clear
+//! return's `range` in m, calibrated `reflectivity`, `ring`, `elevation` and
+//! `azimuth` in degrees), `mor` (the applied MOR, m), or a `weather.csv`
+//! column by its exact header, whose value the user supplies per batch
+//! (`murk apply --covariate "NAME=VALUE"`). When a scan-level value is not
+//! supplied the term uses its `default`, the campaign-wide value fitted
+//! beside the bins.
+//!
+//! ```
+//! use std::collections::BTreeMap;
+//! use murk_types::{CovariateValue, ExtensionFunction, ExtensionObservable, ModelExtension, PointCovariates};
+//!
+//! // Ground rings (elevation below −4°) lose their returns 20 % sooner.
+//! let ext = ModelExtension {
+//!     observable: ExtensionObservable::Survival,
+//!     covariate: "elevation".into(),
+//!     function: ExtensionFunction::Bins { edges: vec![-4.0], values: vec![0.8, 1.0] },
+//!     default: 1.0,
+//!     description: "wet road".into(),
+//! };
+//! let ground = PointCovariates { range: 8.0, reflectivity: 20.0, ring: 0, elevation: -15.0, azimuth: 3.0 };
+//! let scan = BTreeMap::<String, CovariateValue>::new();
+//! assert_eq!(ext.value(Some(&ground), &scan, 100.0), 0.8);
+//! assert!(ext.is_point_level());
+//! assert!(ext.check().is_ok());
+//! ```
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+
+/// The point-level covariate names.
+pub const POINT_COVARIATES: [&str; 5] = ["range", "reflectivity", "ring", "elevation", "azimuth"];
+
+/// What an extension changes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ExtensionObservable {
+    /// Whether a clear return is kept (factor on the vanishing distance).
+    Survival,
+    /// Returns with no clear counterpart (factor on the expected count).
+    Count,
+    /// Range of kept returns (additive bias, metres).
+    Range,
+    /// Reflectivity of kept returns (factor).
+    Intensity,
+}
+
+impl ExtensionObservable {
+    /// The name used in reports (`survival`, `count`, `range`, `intensity`).
+    pub fn name(self) -> &'static str {
+        match self {
+            ExtensionObservable::Survival => "survival",
+            ExtensionObservable::Count => "count",
+            ExtensionObservable::Range => "range",
+            ExtensionObservable::Intensity => "intensity",
+        }
+    }
+
+    /// The value that changes nothing.
+    pub fn neutral(self) -> f64 {
+        match self {
+            ExtensionObservable::Range => 0.0,
+            _ => 1.0,
+        }
+    }
+
+    /// True when values combine by multiplication (factors), false when they
+    /// add (the range bias).
+    pub fn multiplicative(self) -> bool {
+        self != ExtensionObservable::Range
+    }
+}
+
+/// A piecewise-constant function of the covariate.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum ExtensionFunction {
+    /// Numeric covariate: `values[k]` where `k` is the number of `edges` at
+    /// or below the value (`edges` ascending, one fewer than `values`).
+    Bins {
+        /// Bin edges, ascending.
+        edges: Vec<f64>,
+        /// Value per bin.
+        values: Vec<f64>,
+    },
+    /// Categorical covariate: the value of the category (the extension's
+    /// `default` for any other).
+    Categories {
+        /// Value per category.
+        values: BTreeMap<String, f64>,
+    },
+}
+
+/// A value of a scan-level covariate.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum CovariateValue {
+    /// A number.
+    Number(f64),
+    /// A category.
+    Text(String),
+}
+
+impl CovariateValue {
+    /// Parses a command-line value: a number when it parses as one, else text.
+    pub fn parse(s: &str) -> CovariateValue {
+        match s.trim().parse::<f64>() {
+            Ok(v) if v.is_finite() => CovariateValue::Number(v),
+            _ => CovariateValue::Text(s.trim().to_string()),
+        }
+    }
+}
+
+/// The point-level covariates of one clear return.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PointCovariates {
+    /// Range, metres.
+    pub range: f64,
+    /// Calibrated reflectivity.
+    pub reflectivity: f64,
+    /// Laser id.
+    pub ring: u16,
+    /// Elevation, degrees.
+    pub elevation: f64,
+    /// Azimuth, degrees in [0, 360).
+    pub azimuth: f64,
+}
+
+impl PointCovariates {
+    /// The covariates of a point at `(x, y, z)`.
+    pub fn of_point(x: f64, y: f64, z: f64, reflectivity: f64, ring: u16) -> PointCovariates {
+        let rxy = x.hypot(y);
+        let mut azimuth = y.atan2(x).to_degrees();
+        if azimuth < 0.0 {
+            azimuth += 360.0;
+        }
+        PointCovariates {
+            range: rxy.hypot(z),
+            reflectivity,
+            ring,
+            elevation: z.atan2(rxy).to_degrees(),
+            azimuth,
+        }
+    }
+
+    /// The value of a point-level covariate by name.
+    pub fn get(&self, name: &str) -> Option<f64> {
+        Some(match name {
+            "range" => self.range,
+            "reflectivity" => self.reflectivity,
+            "ring" => self.ring as f64,
+            "elevation" => self.elevation,
+            "azimuth" => self.azimuth,
+            _ => return None,
+        })
+    }
+}
+
+/// One fitted extension term (see the module docs).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ModelExtension {
+    /// What it changes.
+    pub observable: ExtensionObservable,
+    /// Its covariate: a point-level name, `mor`, or a `weather.csv` header.
+    pub covariate: String,
+    /// The function of the covariate.
+    pub function: ExtensionFunction,
+    /// The value used when the covariate is unknown (a scan-level value not
+    /// supplied, an unlisted category).
+    pub default: f64,
+    /// Plain-language description (what was found, on what data).
+    #[serde(default)]
+    pub description: String,
+}
+
+impl ModelExtension {
+    /// True when the covariate is per point.
+    pub fn is_point_level(&self) -> bool {
+        POINT_COVARIATES.contains(&self.covariate.as_str())
+    }
+
+    /// Checks the term: finite values, ascending edges, factors ≥ 0, a count
+    /// term on a scan-level covariate.
+    pub fn check(&self) -> Result<(), String> {
+        if self.covariate.trim().is_empty() {
+            return Err("covariate is empty".into());
+        }
+        let values: Vec<f64> = match &self.function {
+            ExtensionFunction::Bins { edges, values } => {
+                if values.len() != edges.len() + 1 {
+                    return Err(format!(
+                        "{} values for {} edges (need one more value than edges)",
+                        values.len(),
+                        edges.len()
+                    ));
+                }
+                if let Some(e) = edges.iter().find(|e| !e.is_finite()) {
+                    return Err(format!("edge {e} is not finite"));
+                }
+                if edges.windows(2).any(|w| !(w[0] < w[1])) {
+                    return Err("edges are not strictly ascending".into());
+                }
+                values.clone()
+            }
+            ExtensionFunction::Categories { values } => values.values().copied().collect(),
+        };
+        for v in values.iter().chain(std::iter::once(&self.default)) {
+            if !v.is_finite() {
+                return Err(format!("value {v} is not finite"));
+            }
+            if self.observable.multiplicative() && *v < 0.0 {
+                return Err(format!("factor {v} is negative"));
+            }
+        }
+        if self.observable == ExtensionObservable::Count && self.is_point_level() {
+            return Err(format!(
+                "a count term needs a scan-level covariate (mor or a weather.csv column), not {:?}",
+                self.covariate
+            ));
+        }
+        Ok(())
+    }
+
+    /// The function's value for a point (`None` for scan-level evaluation),
+    /// the scan's covariate values and its MOR.
+    pub fn value(
+        &self,
+        point: Option<&PointCovariates>,
+        scan: &BTreeMap<String, CovariateValue>,
+        mor_m: f64,
+    ) -> f64 {
+        let x = if let Some(v) = point.and_then(|p| p.get(&self.covariate)) {
+            Some(CovariateValue::Number(v))
+        } else if self.covariate == "mor" {
+            Some(CovariateValue::Number(mor_m))
+        } else {
+            scan.get(&self.covariate).cloned()
+        };
+        self.value_of(x.as_ref())
+    }
+
+    /// The function's value at a covariate value (`None`: unknown).
+    pub fn value_of(&self, x: Option<&CovariateValue>) -> f64 {
+        match (&self.function, x) {
+            (ExtensionFunction::Bins { edges, values }, Some(CovariateValue::Number(x)))
+                if x.is_finite() =>
+            {
+                values[edges.partition_point(|e| e <= x)]
+            }
+            (ExtensionFunction::Categories { values }, Some(CovariateValue::Text(t))) => {
+                values.get(t).copied().unwrap_or(self.default)
+            }
+            (ExtensionFunction::Categories { values }, Some(CovariateValue::Number(x))) => values
+                .iter()
+                .find(|(k, _)| k.trim().parse::<f64>().ok() == Some(*x))
+                .map(|(_, v)| *v)
+                .unwrap_or(self.default),
+            _ => self.default,
+        }
+    }
+}
+
+/// Combines the values of several terms on one observable (factors
+/// multiply, biases add).
+pub fn combine(observable: ExtensionObservable, values: impl IntoIterator<Item = f64>) -> f64 {
+    if observable.multiplicative() {
+        values.into_iter().product()
+    } else {
+        values.into_iter().sum()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn bins(edges: Vec<f64>, values: Vec<f64>) -> ModelExtension {
+        ModelExtension {
+            observable: ExtensionObservable::Intensity,
+            covariate: "Wind speed (m/s)".into(),
+            function: ExtensionFunction::Bins { edges, values },
+            default: 0.9,
+            description: String::new(),
+        }
+    }
+
+    #[test]
+    fn bins_pick_by_edges_and_fall_back_to_default() {
+        let e = bins(vec![2.0, 5.0], vec![1.0, 0.8, 0.5]);
+        let v = |x: f64| e.value_of(Some(&CovariateValue::Number(x)));
+        assert_eq!(
+            (v(1.9), v(2.0), v(4.99), v(5.0), v(50.0)),
+            (1.0, 0.8, 0.8, 0.5, 0.5)
+        );
+        assert_eq!(e.value_of(None), 0.9);
+        assert_eq!(e.value_of(Some(&CovariateValue::Text("calm".into()))), 0.9);
+        let scan = BTreeMap::from([("Wind speed (m/s)".to_string(), CovariateValue::Number(3.0))]);
+        assert_eq!(e.value(None, &scan, 100.0), 0.8);
+        assert_eq!(e.value(None, &BTreeMap::new(), 100.0), 0.9);
+    }
+
+    #[test]
+    fn categories_and_point_covariates() {
+        let mut e = ModelExtension {
+            observable: ExtensionObservable::Count,
+            covariate: "Road state".into(),
+            function: ExtensionFunction::Categories {
+                values: BTreeMap::from([("wet".to_string(), 2.0)]),
+            },
+            default: 1.0,
+            description: String::new(),
+        };
+        let scan = BTreeMap::from([("Road state".to_string(), CovariateValue::parse("wet"))]);
+        assert_eq!(e.value(None, &scan, 50.0), 2.0);
+        assert!(e.check().is_ok());
+        e.covariate = "ring".into();
+        assert!(e.check().unwrap_err().contains("scan-level"));
+        // A point straight ahead, 1 m up at 10 m: elevation atan(0.1).
+        let p = PointCovariates::of_point(10.0, 0.0, 1.0, 7.0, 3);
+        assert!((p.elevation - 0.1f64.atan().to_degrees()).abs() < 1e-12);
+        assert_eq!(p.azimuth, 0.0);
+        let p = PointCovariates::of_point(0.0, -2.0, 0.0, 7.0, 3);
+        assert!((p.azimuth - 270.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn check_rejects_bad_terms() {
+        assert!(bins(vec![2.0, 1.0], vec![1.0, 1.0, 1.0]).check().is_err());
+        assert!(bins(vec![2.0], vec![1.0]).check().is_err());
+        assert!(bins(vec![2.0], vec![1.0, -0.1]).check().is_err());
+        let mut r = bins(vec![2.0], vec![-0.05, 0.05]);
+        r.observable = ExtensionObservable::Range;
+        assert!(r.check().is_ok());
+        assert!(bins(vec![f64::NAN], vec![1.0, 1.0]).check().is_err());
+    }
+
+    #[test]
+    fn combine_multiplies_factors_and_adds_biases() {
+        assert_eq!(combine(ExtensionObservable::Survival, [0.5, 0.5]), 0.25);
+        assert_eq!(combine(ExtensionObservable::Range, [0.5, 0.5]), 1.0);
+        assert_eq!(combine(ExtensionObservable::Count, []), 1.0);
+    }
+}
