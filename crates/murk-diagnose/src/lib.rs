@@ -461,11 +461,33 @@ impl DiagnoseValidParams {
         for (f, t) in findings.iter_mut().zip(&tests) {
             f.cause = report::cause(f, t.observable, p.weather);
         }
+        // Order: significant first; observables by their strongest
+        // significant finding; within one observable, dependence seen inside
+        // recordings (point level) before dependence across recordings
+        // (recording means mix returns whose composition changes with the
+        // scan: at low MOR only near returns survive), then strength.
+        let mut group: BTreeMap<&str, f64> = BTreeMap::new();
+        for f in findings.iter().filter(|f| f.significant) {
+            let g = group.entry(f.observable.as_str()).or_insert(0.0);
+            *g = g.max(f.strength);
+        }
+        let gs = |i: usize| {
+            group
+                .get(findings[i].observable.as_str())
+                .copied()
+                .unwrap_or(0.0)
+        };
+        let point = |i: usize| findings[i].level == "point";
         let mut idx: Vec<usize> = (0..findings.len()).collect();
         idx.sort_by(|&a, &b| {
             findings[b]
                 .significant
                 .cmp(&findings[a].significant)
+                .then(gs(b).total_cmp(&gs(a)))
+                .then(
+                    (findings[b].significant && point(b))
+                        .cmp(&(findings[a].significant && point(a))),
+                )
                 .then(findings[b].strength.total_cmp(&findings[a].strength))
                 .then(a.cmp(&b))
         });
@@ -710,9 +732,13 @@ impl DiagnoseValidParams {
             .collect()
     }
 
-    /// Re-tests every significant finding that is not the top one of its
-    /// observable on the residual left after the top one's profile; marks it
-    /// explained when it is no longer significant and relevant.
+    /// Pairwise re-tests among the significant findings of each observable:
+    /// `a` is re-tested on the residual left after removing `b`'s profile.
+    /// A finding that a stronger one explains, and that does not explain it
+    /// back, is marked explained (not significant). Mutual explanations are
+    /// aliases (ring and elevation group one LiDAR's returns identically):
+    /// the one with the larger profile, or on a tie the simpler profile
+    /// (least total variation along its own order), is kept.
     fn explain_away(
         &self,
         loaded: &Loaded,
@@ -722,83 +748,141 @@ impl DiagnoseValidParams {
         findings: &mut [Finding],
     ) {
         let p = &self.0;
-        let nrec = evals.len();
         let m = tests.len() as f64;
+        let tv = |t: &Test| -> f64 {
+            t.outcome
+                .profile
+                .windows(2)
+                .map(|w| (w[1].mean_residual - w[0].mean_residual).abs())
+                .sum()
+        };
         for obs in [
             ExtensionObservable::Survival,
             ExtensionObservable::Count,
             ExtensionObservable::Range,
             ExtensionObservable::Intensity,
         ] {
-            let Some(top) = (0..tests.len())
+            let sig: Vec<usize> = (0..tests.len())
                 .filter(|&i| tests[i].observable == obs && findings[i].significant)
-                .max_by(|&a, &b| findings[a].strength.total_cmp(&findings[b].strength))
-            else {
+                .collect();
+            if sig.len() < 2 {
                 continue;
-            };
-            let tt = tests[top].clone();
-            let profile_of = |bin: Option<usize>| -> f64 {
-                let Some(b) = bin else { return 0.0 };
-                let label = tt.binning.labels().get(b).cloned().unwrap_or_default();
-                tt.outcome
-                    .profile
-                    .iter()
-                    .find(|x| x.label == label)
-                    .map_or(0.0, |x| x.mean_residual)
-            };
-            // Residuals with the top profile removed.
-            let rec_cov = |r: usize| &loaded.recs[evals[r].rec].scan;
-            for i in 0..tests.len() {
-                if i == top || tests[i].observable != obs || !findings[i].significant {
-                    continue;
-                }
-                let seed = seed_of(p.seed, &["retest", obs.name(), &tests[i].covariate]);
-                let outcome = if tests[i].point_level {
-                    let Some(pts) = res.points.get(&obs) else {
-                        continue;
-                    };
-                    let units: Vec<(usize, f64, f64, f64)> = pts
-                        .iter()
-                        .filter_map(|(r, pc, e, w)| {
-                            let x = pc.get(&tests[i].covariate)?;
-                            let b = match pc.get(&tt.covariate) {
-                                Some(v) => tt.binning.of_number(v),
-                                None => rec_cov(*r)
-                                    .get(&tt.covariate)
-                                    .and_then(|v| tt.binning.of(v)),
-                            };
-                            Some((*r, x, e - profile_of(b), *w))
-                        })
-                        .collect();
-                    point_test(&units, nrec, &tests[i].binning, p.permutations, seed)
+            }
+            let pairs: Vec<(usize, usize)> = sig
+                .iter()
+                .flat_map(|&a| sig.iter().filter(move |&&b| b != a).map(move |&b| (a, b)))
+                .collect();
+            let explained: BTreeMap<(usize, usize), bool> = pairs
+                .par_iter()
+                .map(|&(a, b)| {
+                    let o = self.retest(loaded, evals, res, &tests[a], &tests[b]);
+                    let keeps =
+                        (o.p_value * m).min(1.0) < p.alpha && o.strength >= p.relevance.of(obs);
+                    ((a, b), !keeps)
+                })
+                .collect();
+            let prefer = |b: usize, a: usize| -> bool {
+                let (xa, xb) = (tests[a].outcome.amplitude, tests[b].outcome.amplitude);
+                if (xa - xb).abs() <= 1e-9 * xa.max(xb) {
+                    tv(&tests[b]) < tv(&tests[a])
                 } else {
-                    let Some(scan) = res.scans.get(&obs) else {
-                        continue;
-                    };
-                    // A point-level top profile is centred within recordings:
-                    // it leaves recording means unchanged.
-                    let vals: Vec<(&CovariateValue, f64)> = (0..nrec)
-                        .filter_map(|r| {
-                            let v = rec_cov(r).get(&tests[i].covariate)?;
-                            let e = scan[r]?;
-                            let adj = if tt.point_level {
-                                0.0
-                            } else {
-                                profile_of(
-                                    rec_cov(r).get(&tt.covariate).and_then(|v| tt.binning.of(v)),
-                                )
-                            };
-                            Some((v, e - adj))
-                        })
-                        .collect();
-                    scan_test(&vals, &tests[i].binning, p.permutations, seed)
-                };
-                let threshold = p.relevance.of(obs);
-                let padj = (outcome.p_value * m).min(1.0);
-                if !(padj < p.alpha && outcome.strength >= threshold) {
-                    findings[i].significant = false;
-                    findings[i].explained_by = Some(tt.covariate.clone());
+                    xb > xa
                 }
+            };
+            let mut marks = Vec::new();
+            for &a in &sig {
+                let by = sig
+                    .iter()
+                    .copied()
+                    .filter(|&b| b != a && explained[&(a, b)])
+                    .filter(|&b| !explained[&(b, a)] || prefer(b, a))
+                    .max_by(|&x, &y| findings[x].strength.total_cmp(&findings[y].strength));
+                if let Some(b) = by {
+                    marks.push((a, b));
+                }
+            }
+            for (a, b) in marks {
+                findings[a].significant = false;
+                findings[a].explained_by = Some(tests[b].covariate.clone());
+            }
+        }
+    }
+
+    /// Test `a` again on the residuals left after removing `b`'s profile.
+    fn retest(
+        &self,
+        loaded: &Loaded,
+        evals: &[RecEval],
+        res: &Residuals,
+        a: &Test,
+        b: &Test,
+    ) -> TestOutcome {
+        let p = &self.0;
+        let nrec = evals.len();
+        let seed = seed_of(
+            p.seed,
+            &["retest", a.observable.name(), &a.covariate, &b.covariate],
+        );
+        let labels = b.binning.labels();
+        let level: BTreeMap<&str, f64> = b
+            .outcome
+            .profile
+            .iter()
+            .map(|x| (x.label.as_str(), x.mean_residual))
+            .collect();
+        let prof = |bin: Option<usize>| -> f64 {
+            bin.and_then(|k| labels.get(k))
+                .and_then(|l| level.get(l.as_str()))
+                .copied()
+                .unwrap_or(0.0)
+        };
+        let scan_of = |r: usize| &loaded.recs[evals[r].rec].scan;
+        let b_scan = |r: usize| prof(scan_of(r).get(&b.covariate).and_then(|v| b.binning.of(v)));
+        match res.points.get(&a.observable) {
+            Some(pts) if a.point_level || b.point_level => {
+                // Point residuals with b removed.
+                let adj: Vec<(usize, murk_types::PointCovariates, f64, f64)> = pts
+                    .iter()
+                    .map(|(r, pc, e, w)| {
+                        let off = if b.point_level {
+                            prof(pc.get(&b.covariate).and_then(|x| b.binning.of_number(x)))
+                        } else {
+                            b_scan(*r)
+                        };
+                        (*r, *pc, e - off, *w)
+                    })
+                    .collect();
+                if a.point_level {
+                    let units: Vec<(usize, f64, f64, f64)> = adj
+                        .iter()
+                        .filter_map(|(r, pc, e, w)| pc.get(&a.covariate).map(|x| (*r, x, *e, *w)))
+                        .collect();
+                    point_test(&units, nrec, &a.binning, p.permutations, seed)
+                } else {
+                    let mut s = vec![(0.0f64, 0.0f64); nrec];
+                    for (r, _, e, w) in &adj {
+                        s[*r].0 += e * w;
+                        s[*r].1 += w;
+                    }
+                    let vals: Vec<(&CovariateValue, f64)> = (0..nrec)
+                        .filter(|&r| s[r].1 > 0.0)
+                        .filter_map(|r| Some((scan_of(r).get(&a.covariate)?, s[r].0 / s[r].1)))
+                        .collect();
+                    scan_test(&vals, &a.binning, p.permutations, seed)
+                }
+            }
+            _ => {
+                // Both scan-level: recording residuals with b removed.
+                let scan = res.scans.get(&a.observable).cloned().unwrap_or_default();
+                let vals: Vec<(&CovariateValue, f64)> = (0..nrec)
+                    .filter_map(|r| {
+                        Some((
+                            scan_of(r).get(&a.covariate)?,
+                            scan.get(r).copied()?? - b_scan(r),
+                        ))
+                    })
+                    .collect();
+                scan_test(&vals, &a.binning, p.permutations, seed)
             }
         }
     }
