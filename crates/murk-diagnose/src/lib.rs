@@ -609,7 +609,7 @@ impl DiagnoseValidParams {
                 .iter()
                 .map(|(id, why)| format!("{id}: {why}"))
                 .collect(),
-            method: report::method_text(p.permutations, p.alpha, &p.relevance),
+            method: report::method_text(self.permutations_for(tests.len()), p.alpha, &p.relevance),
             baseline: ModelMetrics {
                 source: if p.coefficients.is_some() {
                     "the coefficient table given".into()
@@ -659,6 +659,16 @@ impl DiagnoseValidParams {
         Ok(table)
     }
 
+    /// Null draws per test for `n_tests` tests: at least enough that the
+    /// smallest attainable p-value survives Holm's adjustment four times
+    /// over (`4·n/α`), so a campaign with many columns does not lose its
+    /// power to the permutation resolution.
+    fn permutations_for(&self, n_tests: usize) -> usize {
+        let p = &self.0;
+        p.permutations
+            .max((4.0 * n_tests as f64 / p.alpha).ceil() as usize)
+    }
+
     /// Every (observable, covariate) test on the held-out residuals.
     fn tests(&self, loaded: &Loaded, evals: &[RecEval], res: &Residuals) -> Vec<Test> {
         let p = &self.0;
@@ -679,6 +689,7 @@ impl DiagnoseValidParams {
                 specs.push((obs, c.clone(), false));
             }
         }
+        let perms = self.permutations_for(specs.len());
         specs
             .par_iter()
             .filter_map(|(obs, cov, point)| {
@@ -695,7 +706,7 @@ impl DiagnoseValidParams {
                     if binning.len() < 2 {
                         return None;
                     }
-                    let outcome = point_test(&units, nrec, &binning, p.permutations, seed);
+                    let outcome = point_test(&units, nrec, &binning, perms, seed);
                     Some(Test {
                         observable: *obs,
                         covariate: cov.clone(),
@@ -719,7 +730,7 @@ impl DiagnoseValidParams {
                     if binning.len() < 2 {
                         return None;
                     }
-                    let outcome = scan_test(&vals, &binning, p.permutations, seed);
+                    let outcome = scan_test(&vals, &binning, perms, seed);
                     Some(Test {
                         observable: *obs,
                         covariate: cov.clone(),
@@ -749,6 +760,7 @@ impl DiagnoseValidParams {
     ) {
         let p = &self.0;
         let m = tests.len() as f64;
+        let perms = self.permutations_for(tests.len());
         let tv = |t: &Test| -> f64 {
             t.outcome
                 .profile
@@ -775,7 +787,7 @@ impl DiagnoseValidParams {
             let explained: BTreeMap<(usize, usize), bool> = pairs
                 .par_iter()
                 .map(|&(a, b)| {
-                    let o = self.retest(loaded, evals, res, &tests[a], &tests[b]);
+                    let o = self.retest(loaded, evals, res, &tests[a], &tests[b], perms);
                     let keeps =
                         (o.p_value * m).min(1.0) < p.alpha && o.strength >= p.relevance.of(obs);
                     ((a, b), !keeps)
@@ -816,6 +828,7 @@ impl DiagnoseValidParams {
         res: &Residuals,
         a: &Test,
         b: &Test,
+        perms: usize,
     ) -> TestOutcome {
         let p = &self.0;
         let nrec = evals.len();
@@ -857,7 +870,7 @@ impl DiagnoseValidParams {
                         .iter()
                         .filter_map(|(r, pc, e, w)| pc.get(&a.covariate).map(|x| (*r, x, *e, *w)))
                         .collect();
-                    point_test(&units, nrec, &a.binning, p.permutations, seed)
+                    point_test(&units, nrec, &a.binning, perms, seed)
                 } else {
                     let mut s = vec![(0.0f64, 0.0f64); nrec];
                     for (r, _, e, w) in &adj {
@@ -868,7 +881,7 @@ impl DiagnoseValidParams {
                         .filter(|&r| s[r].1 > 0.0)
                         .filter_map(|r| Some((scan_of(r).get(&a.covariate)?, s[r].0 / s[r].1)))
                         .collect();
-                    scan_test(&vals, &a.binning, p.permutations, seed)
+                    scan_test(&vals, &a.binning, perms, seed)
                 }
             }
             _ => {
@@ -882,7 +895,7 @@ impl DiagnoseValidParams {
                         ))
                     })
                     .collect();
-                scan_test(&vals, &a.binning, p.permutations, seed)
+                scan_test(&vals, &a.binning, perms, seed)
             }
         }
     }

@@ -26,7 +26,7 @@
 //! assert_eq!(m.voxel_local_difference, Some(0.5));
 //! ```
 
-use std::collections::HashMap;
+use std::collections::BTreeMap;
 
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use serde::{Deserialize, Serialize};
@@ -60,8 +60,9 @@ pub struct SceneMetrics {
     pub chamfer_m: f64,
 }
 
-fn voxels(points: &[[f32; 3]], size: f64) -> HashMap<[i32; 3], u32> {
-    let mut m = HashMap::with_capacity(points.len());
+/// Voxel counts, in key order so that sums over them are reproducible.
+fn voxels(points: &[[f32; 3]], size: f64) -> BTreeMap<[i32; 3], u32> {
+    let mut m = BTreeMap::new();
     for p in points {
         let k = [
             (p[0] as f64 / size).floor() as i32,

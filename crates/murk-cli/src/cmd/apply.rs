@@ -83,6 +83,13 @@ pub struct Args {
     /// Master seed of every random draw.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Value of a scan-level covariate for the table's extension terms
+    /// (from `murk diagnose`), `NAME=VALUE`; repeatable.
+    #[arg(long = "covariate", value_name = "NAME=VALUE")]
+    pub covariates: Vec<String>,
+    /// Apply the baseline model of an extended table (ignore its extension terms).
+    #[arg(long)]
+    pub no_extensions: bool,
     /// Range-scale coefficient of the target sensor; default: the table's.
     #[arg(long)]
     pub range_scale: Option<f64>,
@@ -144,7 +151,14 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         .attenuate_intensity(a.attenuate_intensity)
         .soft_edge(a.soft_edge)
         .slope_source(a.slope)
-        .seed(a.seed);
+        .seed(a.seed)
+        .extensions(!a.no_extensions);
+    for c in &a.covariates {
+        let (name, value) = c
+            .split_once('=')
+            .with_context(|| format!("--covariate {c:?}: expected NAME=VALUE"))?;
+        params = params.covariate(name.trim(), murk_types::CovariateValue::parse(value));
+    }
     if let Some(k) = a.range_scale {
         params = params.range_scale(k);
     }

@@ -1,0 +1,165 @@
+//! Extension terms (from `murk diagnose`) applied by murk-infer: known
+//! answers per observable, the baseline when turned off, and the same bytes
+//! whatever the thread count.
+
+use std::collections::BTreeMap;
+
+use murk_infer::{ApplyParams, CoefficientTable, PointCloud, Severity};
+use murk_types::{
+    CovariateValue, ExtensionFunction, ExtensionObservable, ModelExtension, WeatherClass,
+};
+
+fn table(ext: Vec<ModelExtension>) -> CoefficientTable {
+    let mut t = CoefficientTable::from_json(
+        r#"{
+      "format": "weather-noise-coefficients/1", "campaign": "ext",
+      "lidar": { "model": "VLP16", "range_scale": 1.0 },
+      "weathers": { "fog": {
+        "recordings": 28, "quantile": 0.99, "no_change_rate": 0.38,
+        "vanishing_slope": [
+          { "reflectivity_min": 0,  "reflectivity_max": 10,   "slope": 0.3, "points": 1 },
+          { "reflectivity_min": 10, "reflectivity_max": null, "slope": 0.4, "points": 1 } ],
+        "ghost": null, "ring": null } },
+      "provenance": { "tool": "test", "inputs_sha256": "", "parameters": {} }
+    }"#,
+    )
+    .unwrap();
+    t.weathers.get_mut(&WeatherClass::Fog).unwrap().extensions = ext;
+    t.validate().unwrap();
+    t
+}
+
+fn term(obs: ExtensionObservable, cov: &str, edges: Vec<f64>, values: Vec<f64>) -> ModelExtension {
+    ModelExtension {
+        observable: obs,
+        covariate: cov.into(),
+        function: ExtensionFunction::Bins { edges, values },
+        default: obs.neutral(),
+        description: String::new(),
+    }
+}
+
+#[test]
+fn each_term_does_what_its_table_says() {
+    // MOR 100: vanishing distances 30 m (dark) and 40 m (bright).
+    let t = table(vec![
+        // Ground returns (elevation < −4°) vanish at half the distance.
+        term(
+            ExtensionObservable::Survival,
+            "elevation",
+            vec![-4.0],
+            vec![0.5, 1.0],
+        ),
+        // Returns beyond 20 m come back at 80 % reflectivity.
+        term(
+            ExtensionObservable::Intensity,
+            "range",
+            vec![20.0],
+            vec![1.0, 0.8],
+        ),
+    ]);
+    let mut scan = PointCloud::with_capacity(4);
+    scan.push(35.0, 0.0, 0.0, 50.0, 0); // bright, level, 35 m < 40: kept, 80 %
+    scan.push(25.0, 0.0, -3.0, 50.0, 1); // bright, −6.8°: 25.2 m > 20: vanishes
+    scan.push(15.0, 0.0, -3.0, 50.0, 2); // bright, −11.3°: 15.3 m < 20: kept, 100 %
+    scan.push(35.0, 0.0, 0.0, 5.0, 3); // dark, 35 m > 30: vanishes
+    let ap = ApplyParams::new(WeatherClass::Fog, Severity::Mor(100.0))
+        .build(&t)
+        .unwrap();
+    let (out, summary) = ap.apply(&scan, "s").unwrap();
+    assert_eq!(out.ring, vec![0, 2]);
+    assert_eq!(out.intensity, vec![40.0, 50.0]);
+    assert_eq!(out.x, vec![35.0, 15.0]);
+    assert_eq!(
+        (summary.points_in, summary.points_out, summary.vanished),
+        (4, 2, 2)
+    );
+    assert_eq!(ap.describe().extensions.len(), 2);
+    // Turned off: the baseline keeps the ground return at 25 m.
+    let base = ApplyParams::new(WeatherClass::Fog, Severity::Mor(100.0))
+        .extensions(false)
+        .build(&t)
+        .unwrap();
+    assert_eq!(base.apply(&scan, "s").unwrap().0.ring, vec![0, 1, 2]);
+    // The keep probability the diagnosis uses agrees.
+    assert_eq!(ap.survival_probability(25.2, 50.0, 0.5, false), 0.0);
+    assert_eq!(ap.survival_probability(25.2, 50.0, 1.0, false), 1.0);
+}
+
+#[test]
+fn scan_level_terms_use_the_value_given_or_their_default() {
+    let mut bias = term(ExtensionObservable::Range, "Road state", vec![], vec![0.0]);
+    bias.function = ExtensionFunction::Categories {
+        values: BTreeMap::from([("wet".to_string(), 0.5)]),
+    };
+    bias.default = 0.25;
+    let t = table(vec![bias]);
+    let mut scan = PointCloud::with_capacity(1);
+    scan.push(10.0, 0.0, 0.0, 50.0, 0);
+    let wet = ApplyParams::new(WeatherClass::Fog, Severity::Mor(100.0))
+        .covariate("Road state", CovariateValue::parse("wet"))
+        .build(&t)
+        .unwrap();
+    assert!(wet.warnings().is_empty());
+    assert_eq!(wet.apply(&scan, "s").unwrap().0.x, vec![10.5]);
+    let unknown = ApplyParams::new(WeatherClass::Fog, Severity::Mor(100.0))
+        .build(&t)
+        .unwrap();
+    assert!(
+        unknown.warnings()[0].contains("Road state"),
+        "{:?}",
+        unknown.warnings()
+    );
+    assert_eq!(unknown.apply(&scan, "s").unwrap().0.x, vec![10.25]);
+    // Clear weather stays the identity.
+    let clear = ApplyParams::new(WeatherClass::Fog, Severity::Mor(5000.0))
+        .build(&t)
+        .unwrap();
+    assert_eq!(clear.apply(&scan, "s").unwrap().0, scan);
+}
+
+#[test]
+fn soft_edge_with_terms_is_the_same_for_any_thread_count() {
+    let mut t = table(vec![term(
+        ExtensionObservable::Survival,
+        "azimuth",
+        vec![180.0],
+        vec![0.7, 1.2],
+    )]);
+    let w = t.weathers.get_mut(&WeatherClass::Fog).unwrap();
+    w.survival = Some(
+        serde_json::from_value(serde_json::json!({"edge": "probit", "dropout": 0.05,
+            "residual": 0.01, "neg_log_likelihood": 1.0, "trials": 100}))
+        .unwrap(),
+    );
+    for b in &mut w.vanishing_slope {
+        b.edge_width = Some(0.1);
+    }
+    let mut scan = PointCloud::with_capacity(20_000);
+    for i in 0..20_000 {
+        let a = i as f32 * 0.018_f32.to_radians() * 20.0;
+        let r = 5.0 + (i % 50) as f32;
+        scan.push(
+            r * a.cos(),
+            r * a.sin(),
+            0.0,
+            (i % 30) as f32,
+            (i % 16) as u16,
+        );
+    }
+    let ap = ApplyParams::new(WeatherClass::Fog, Severity::Mor(100.0))
+        .soft_edge(true)
+        .seed(3)
+        .build(&t)
+        .unwrap();
+    let run = |n| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build()
+            .unwrap()
+            .install(|| ap.apply(&scan, "k").unwrap().0)
+    };
+    let one = run(1);
+    assert_eq!(one, run(3));
+    assert!(one.len() > 1000 && one.len() < scan.len());
+}
