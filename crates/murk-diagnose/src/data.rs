@@ -181,7 +181,8 @@ pub fn load(
     }
     let (reference, _) = build_reference(&inputs, &clear_in, &grid, params).map_err(fit_err)?;
     // What pairing does to range and reflectivity in clear weather, per cell.
-    let offsets: Vec<Result<Vec<(u32, f64, f64)>, DiagnoseError>> = clear_in
+    type CellOffsets = Vec<(u32, f64, f64)>;
+    let offsets: Vec<Result<CellOffsets, DiagnoseError>> = clear_in
         .par_iter()
         .map(|r| {
             let (points, _) =

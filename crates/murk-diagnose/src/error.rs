@@ -30,7 +30,7 @@ pub enum DiagnoseError {
         what: String,
         /// The fit's error.
         #[source]
-        source: murk_fit::FitError,
+        source: Box<murk_fit::FitError>,
     },
     /// Building or applying the model failed.
     #[error("simulating with the {what} model: {source}")]
@@ -39,7 +39,7 @@ pub enum DiagnoseError {
         what: String,
         /// The applier's error.
         #[source]
-        source: murk_infer::InferError,
+        source: Box<murk_infer::InferError>,
     },
     /// A recording cannot be read.
     #[error("{}: {reason}", path.display())]

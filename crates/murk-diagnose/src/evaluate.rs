@@ -117,7 +117,7 @@ pub fn applier(
     }
     p.build(table).map_err(|e| DiagnoseError::Infer {
         what: format!("recording {}", rec.id),
-        source: e,
+        source: Box::new(e),
     })
 }
 
@@ -265,7 +265,7 @@ fn simulate(
         let key = format!("{}#{s}", rec.id);
         let (out, _) = ap.apply(&clear, &key).map_err(|e| DiagnoseError::Infer {
             what: format!("recording {}", rec.id),
-            source: e,
+            source: Box::new(e),
         })?;
         let pts = cell_points(grid, &out, &clear_rec.lidar).map_err(|e| DiagnoseError::Read {
             path: clear_rec.lidar.clone(),

@@ -81,8 +81,9 @@ pub fn fit_term(
     let (values, default): (Vec<Option<f64>>, f64) = match observable {
         ExtensionObservable::Survival => {
             // (applier index, r, ρ, kept, trials) per bin.
+            type Item = (usize, f64, f64, f64, f64);
             let mut appliers = Vec::with_capacity(evals.len());
-            let mut items: Vec<Vec<(usize, f64, f64, f64, f64)>> = vec![Vec::new(); nb];
+            let mut items: Vec<Vec<Item>> = vec![Vec::new(); nb];
             for e in evals {
                 let rec = &loaded.recs[e.rec];
                 appliers.push(applier(table, loaded, rec, false, 0)?);
@@ -100,7 +101,7 @@ pub fn fit_term(
                     }
                 }
             }
-            let ml = |its: &[&(usize, f64, f64, f64, f64)]| -> f64 {
+            let ml = |its: &[&Item]| -> f64 {
                 let nll = |lf: f64| -> f64 {
                     let f = lf.exp();
                     its.iter()
@@ -114,7 +115,7 @@ pub fn fit_term(
                 };
                 golden(nll, 0.2f64.ln(), 5f64.ln()).exp()
             };
-            let all: Vec<&(usize, f64, f64, f64, f64)> = items.iter().flatten().collect();
+            let all: Vec<&Item> = items.iter().flatten().collect();
             let pooled = ml(&all);
             let v = items
                 .iter()

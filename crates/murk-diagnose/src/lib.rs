@@ -370,7 +370,7 @@ impl DiagnoseValidParams {
             .check()
             .map_err(|e| DiagnoseError::Fit {
                 what: "parameters".into(),
-                source: e,
+                source: Box::new(e),
             })
     }
 
@@ -647,7 +647,7 @@ impl DiagnoseValidParams {
         });
         let fitted = params.fit_inputs(&inputs).map_err(|e| DiagnoseError::Fit {
             what: what.to_string(),
-            source: e,
+            source: Box::new(e),
         })?;
         let table = fitted.table().clone();
         if !table.weathers.contains_key(&loaded.weather) {

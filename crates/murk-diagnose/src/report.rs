@@ -162,7 +162,7 @@ impl FigureData {
             .apply(&clear, &format!("{}#figure", rec.id))
             .map_err(|e| DiagnoseError::Infer {
                 what: format!("recording {}", rec.id),
-                source: e,
+                source: Box::new(e),
             })?;
         Ok(FigureData {
             recording: rec.id.clone(),
