@@ -434,18 +434,39 @@ impl Applier {
         }
 
         if self.near_range {
-            let settings = NearSettings {
-                ghost: self.ghost.as_ref(),
-                ring: self.ring.as_ref(),
-                lidar: self.lidar.as_ref(),
-                azimuth_resolution_deg: self.azimuth_resolution_deg,
-            };
-            let (g, r) =
-                add_near_range(cloud, &mut out, &settings, seed, key, &mut summary.warnings)?;
-            summary.ghost = g;
-            summary.ring = r;
+            self.add_near(
+                cloud,
+                &mut out,
+                (self.ghost.as_ref(), self.ring.as_ref()),
+                seed,
+                key,
+                &mut summary,
+            )?;
         }
         summary.points_out = out.len() as u64;
         Ok((out, summary))
+    }
+
+    /// Adds the ghost and ring returns of `laws` to `out` (rays of `cloud`)
+    /// and records them in `summary`.
+    pub(crate) fn add_near(
+        &self,
+        cloud: &PointCloud,
+        out: &mut PointCloud,
+        laws: (Option<&NearLaw>, Option<&NearLaw>),
+        seed: ScanSeed,
+        key: &str,
+        summary: &mut ApplySummary,
+    ) -> Result<(), InferError> {
+        let settings = NearSettings {
+            ghost: laws.0,
+            ring: laws.1,
+            lidar: self.lidar.as_ref(),
+            azimuth_resolution_deg: self.azimuth_resolution_deg,
+        };
+        let (g, r) = add_near_range(cloud, out, &settings, seed, key, &mut summary.warnings)?;
+        summary.ghost = g;
+        summary.ring = r;
+        Ok(())
     }
 }

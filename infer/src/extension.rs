@@ -30,7 +30,6 @@ use std::collections::BTreeMap;
 
 use crate::applier::{Applier, EdgeLaw};
 use crate::error::InferError;
-use crate::near::{NearSettings, add_near_range};
 use crate::sampling::{Purpose, ScanSeed, norm_cdf};
 use crate::summary::ApplySummary;
 
@@ -258,16 +257,14 @@ impl Applier {
                 })
             };
             let (ghost, ring) = (scaled(&self.ghost), scaled(&self.ring));
-            let settings = NearSettings {
-                ghost: ghost.as_ref(),
-                ring: ring.as_ref(),
-                lidar: self.lidar.as_ref(),
-                azimuth_resolution_deg: self.azimuth_resolution_deg,
-            };
-            let (g, r) =
-                add_near_range(cloud, &mut out, &settings, seed, key, &mut summary.warnings)?;
-            summary.ghost = g;
-            summary.ring = r;
+            self.add_near(
+                cloud,
+                &mut out,
+                (ghost.as_ref(), ring.as_ref()),
+                seed,
+                key,
+                &mut summary,
+            )?;
         }
         summary.points_out = out.len() as u64;
         Ok((out, summary))

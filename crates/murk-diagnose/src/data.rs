@@ -136,6 +136,28 @@ pub fn log_ratio(measured: f64, reference: f64) -> f64 {
     measured.max(REFLECTIVITY_FLOOR).ln() - reference.max(REFLECTIVITY_FLOOR).ln()
 }
 
+/// Reads a recording into grid cells and pairs it with the reference.
+fn read_and_pair(
+    r: &RecordingInput,
+    spec: &LidarSpec,
+    reference: &ClearReference,
+    params: &FitValidParams,
+) -> Result<PairedRecording, DiagnoseError> {
+    let (points, _) =
+        read_lidar(&r.lidar, spec, reference.grid()).map_err(|e| DiagnoseError::Read {
+            path: r.lidar.clone(),
+            reason: e.to_string(),
+        })?;
+    let (tally, pairs) = pair_recording_detailed(reference, &points, params);
+    Ok((points, tally, pairs))
+}
+
+type PairedRecording = (
+    Vec<murk_fit::reference::CellPoint>,
+    murk_fit::pairing::RecordingTally,
+    Vec<murk_fit::pairing::Pair>,
+);
+
 /// Reads a point cloud in calibrated reflectivity.
 pub fn read_calibrated(path: &Path, spec: &LidarSpec) -> Result<PointCloud, DiagnoseError> {
     let opts = ReadOptions {
@@ -185,12 +207,7 @@ pub fn load(
     let offsets: Vec<Result<CellOffsets, DiagnoseError>> = clear_in
         .par_iter()
         .map(|r| {
-            let (points, _) =
-                read_lidar(&r.lidar, &spec, &grid).map_err(|e| DiagnoseError::Read {
-                    path: r.lidar.clone(),
-                    reason: e.to_string(),
-                })?;
-            let (_, pairs) = pair_recording_detailed(&reference, &points, params);
+            let (points, _, pairs) = read_and_pair(r, &spec, &reference, params)?;
             Ok(pairs
                 .iter()
                 .map(|p| {
@@ -272,12 +289,7 @@ pub fn load(
     let recs: Vec<Result<Rec, DiagnoseError>> = wanted
         .par_iter()
         .map(|r| {
-            let (points, _) =
-                read_lidar(&r.lidar, &spec, &grid).map_err(|e| DiagnoseError::Read {
-                    path: r.lidar.clone(),
-                    reason: e.to_string(),
-                })?;
-            let (tally, pairs) = pair_recording_detailed(&reference, &points, params);
+            let (points, tally, pairs) = read_and_pair(r, &spec, &reference, params)?;
             let mut occluded = vec![false; grid.cells()];
             for &c in &tally.occluded {
                 occluded[c as usize] = true;
