@@ -295,6 +295,10 @@ impl DiagnoseParams {
     }
 }
 
+/// Ranking weight of a point-level finding against a scan-level one of the
+/// same observable (see the ordering in [`DiagnoseValidParams::run`]).
+pub const POINT_LEVEL_PREFERENCE: f64 = 1.25;
+
 /// Fewest recordings of the weather a diagnosis accepts.
 pub const MIN_RECORDINGS: usize = 4;
 
@@ -462,10 +466,12 @@ impl DiagnoseValidParams {
             f.cause = report::cause(f, t.observable, p.weather);
         }
         // Order: significant first; observables by their strongest
-        // significant finding; within one observable, dependence seen inside
-        // recordings (point level) before dependence across recordings
-        // (recording means mix returns whose composition changes with the
-        // scan: at low MOR only near returns survive), then strength.
+        // significant finding; within one observable by strength, a
+        // dependence seen inside recordings (point level) weighted by
+        // POINT_LEVEL_PREFERENCE over one across recordings: recording means
+        // mix returns whose composition changes with the scan (at low MOR only
+        // near returns survive), so an effect along range also shows along
+        // MOR, a little weaker or stronger.
         let mut group: BTreeMap<&str, f64> = BTreeMap::new();
         for f in findings.iter().filter(|f| f.significant) {
             let g = group.entry(f.observable.as_str()).or_insert(0.0);
@@ -477,18 +483,21 @@ impl DiagnoseValidParams {
                 .copied()
                 .unwrap_or(0.0)
         };
-        let point = |i: usize| findings[i].level == "point";
+        let score = |i: usize| {
+            let f = &findings[i];
+            if f.significant && f.level == "point" {
+                f.strength * POINT_LEVEL_PREFERENCE
+            } else {
+                f.strength
+            }
+        };
         let mut idx: Vec<usize> = (0..findings.len()).collect();
         idx.sort_by(|&a, &b| {
             findings[b]
                 .significant
                 .cmp(&findings[a].significant)
                 .then(gs(b).total_cmp(&gs(a)))
-                .then(
-                    (findings[b].significant && point(b))
-                        .cmp(&(findings[a].significant && point(a))),
-                )
-                .then(findings[b].strength.total_cmp(&findings[a].strength))
+                .then(score(b).total_cmp(&score(a)))
                 .then(a.cmp(&b))
         });
         let top = idx.first().copied().filter(|&i| findings[i].significant);
