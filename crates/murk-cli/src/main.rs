@@ -8,6 +8,7 @@
 //! murk generate --out fixtures/default-campaign --seed 7
 //! murk campaign summary fixtures/default-campaign
 //! murk convert scan.pcap --out frames/ --format pcd
+//! murk camera --generator fog_heavy.onnx images/ --out foggy/
 //! ```
 
 use clap::{Parser, Subcommand};
@@ -34,8 +35,11 @@ enum Command {
     Fit(cmd::fit::Args),
     /// Apply a fitted weather model to clear-weather point clouds.
     Apply(cmd::apply::Args),
-    /// Render physics-based rain on camera images (depth from PNGs or LiDAR).
+    /// Render physics-based rain on camera images (depth from PNGs or LiDAR);
+    /// with --generator, on a CycleGAN translation first (GAN+PBR).
     Rain(cmd::rain::Args),
+    /// Translate camera images with a CycleGAN weather generator (ONNX).
+    Camera(cmd::camera::Args),
 }
 
 fn main() {
@@ -47,6 +51,7 @@ fn main() {
         Command::Fit(a) => cmd::fit::run(a),
         Command::Apply(a) => cmd::apply::run(a),
         Command::Rain(a) => cmd::rain::run(a),
+        Command::Camera(a) => cmd::camera::run(a),
     };
     if let Err(e) = result {
         eprintln!("murk: error: {e:#}");
