@@ -218,6 +218,10 @@ def write_state_dict(path, state_dict, archive="archive"):
                 return None
 
         sd = OrderedDict((k, _Tensor(v)) for k, v in state_dict.items())
+        # torch's state_dict carries per-module versions in an attribute,
+        # which pickle writes as a BUILD of the OrderedDict.
+        modules = sorted({k.rsplit(".", 1)[0] for k in state_dict})
+        sd._metadata = OrderedDict((m, {"version": 1}) for m in ["", "model", *modules])
         buf = io.BytesIO()
         _Pickler(buf, protocol=2).dump(sd)
     finally:

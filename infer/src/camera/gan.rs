@@ -50,6 +50,9 @@
 //!   [`GeneratorParams::ort_lib`] (the CLI's `--ort-lib`) or `ORT_DYLIB_PATH`
 //!   at it.
 //!
+//! The tests (`tests/camera_gan.rs`) run on either backend; a `native` build
+//! needs `ORT_DYLIB_PATH` set for them.
+//!
 //! Both cannot live in one build: the tract backend replaces ort's API table
 //! for the whole process (ort's `alternative-backend`), and choosing the
 //! native library at run time next to it would need murk to fetch that table
