@@ -160,6 +160,17 @@ pub enum InferError {
         depth_h: u32,
     },
 
+    /// An ONNX generator that cannot be loaded or run (bad model, wrong
+    /// input/output shape, not 3 channels, runtime library missing, …).
+    #[error("{path}: {reason}")]
+    Generator {
+        /// The model file (or the ONNX Runtime library when that is the
+        /// problem).
+        path: PathBuf,
+        /// What is wrong.
+        reason: String,
+    },
+
     /// An output would overwrite one of the inputs.
     #[error("{output}: refusing to overwrite the input {input}; choose another --out")]
     OutputIsInput {

@@ -25,7 +25,11 @@
 //! - [`batch`]: [`batch::plan`] maps input files and folders to outputs,
 //!   [`batch::run`] reads, applies and writes them in parallel and returns a
 //!   [`BatchReport`].
-//! - [`camera`]: physics-based rain on camera images (seed 003 §3.1), [`camera::RainParams`] → [`camera::RainRenderer`].
+//! - [`camera`]: physics-based rain on camera images (seed 003 §3.1),
+//!   [`camera::RainParams`] → [`camera::RainRenderer`]; CycleGAN weather
+//!   generators through ONNX, [`camera::GeneratorParams`] →
+//!   [`camera::Generator`] (backend: cargo feature `tract`, the default,
+//!   or `native`).
 //!
 //! **Reflectivity bands are calibrated VLP-16 reflectivity**, whatever the
 //! input's [`murk_types::IntensityScale`]: a KITTI return stored as 0.03

@@ -8,6 +8,7 @@
 //! murk generate --out fixtures/default-campaign --seed 7
 //! murk campaign summary fixtures/default-campaign
 //! murk convert scan.pcap --out frames/ --format pcd
+//! murk camera --generator fog_heavy.onnx images/ --out foggy/
 //! ```
 
 use clap::{Parser, Subcommand};
@@ -36,8 +37,11 @@ enum Command {
     Apply(cmd::apply::Args),
     /// Show what a fitted model gets wrong on held-out recordings, why, and what extending it gains.
     Diagnose(cmd::diagnose::Args),
-    /// Render physics-based rain on camera images (depth from PNGs or LiDAR).
+    /// Render physics-based rain on camera images (depth from PNGs or LiDAR);
+    /// with --generator, on a CycleGAN translation first (GAN+PBR).
     Rain(cmd::rain::Args),
+    /// Translate camera images with a CycleGAN weather generator (ONNX).
+    Camera(cmd::camera::Args),
 }
 
 fn main() {
@@ -50,6 +54,7 @@ fn main() {
         Command::Apply(a) => cmd::apply::run(a),
         Command::Rain(a) => cmd::rain::run(a),
         Command::Diagnose(a) => cmd::diagnose::run(a),
+        Command::Camera(a) => cmd::camera::run(a),
     };
     if let Err(e) = result {
         eprintln!("murk: error: {e:#}");

@@ -1,4 +1,7 @@
-//! `murk rain`: physics-based rain on camera images (seed 003 §3.1).
+//! `murk rain`: physics-based rain on camera images (seed 003 §3.1), and
+//! with `--generator G.onnx` the GAN+PBR hybrid of seed 003 §3.3: each
+//! image is first translated by the generator (as `murk camera` does), then
+//! the rain layer is rendered on the translation with the image's depth.
 //!
 //! Glue only: flags → a checked [`murk_infer::camera::RainParams`] → one
 //! render per image with its depth (a 16-bit depth PNG, or a LiDAR scan
@@ -10,6 +13,8 @@
 //! ```text
 //! murk rain --rate 50 kitti-000008.png --lidar kitti-000008.bin \
 //!           --calib kitti-000008-calib.txt --out rainy/
+//! murk rain --rate 50 --generator clear2rain.onnx --work-size 448x256 \
+//!           nuscenes.jpg --depth nuscenes-depth.png --out hybrid/
 //! ```
 
 use std::io::IsTerminal as _;
@@ -55,6 +60,12 @@ pub struct Args {
     /// Seed of the drops (image i uses a seed derived from this and i).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// GAN+PBR: translate each image with this ONNX generator first (see
+    /// `murk camera`), then render the rain on the translation.
+    #[arg(long)]
+    pub generator: Option<PathBuf>,
+    #[command(flatten)]
+    pub gen_opts: super::camera::GeneratorOpts,
     /// Hide the progress bar.
     #[arg(long)]
     pub quiet: bool,
@@ -109,6 +120,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             }
         }
     }
+    let mut generator = args
+        .generator
+        .as_deref()
+        .map(|g| args.gen_opts.load(g))
+        .transpose()?;
     let calibs: Vec<KittiCalib> = args
         .calib
         .iter()
@@ -131,7 +147,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let (mut streaks, mut covered) = (0u64, 0.0f64);
     let started = std::time::Instant::now();
     for (i, path) in args.images.iter().enumerate() {
-        let image = read_rgb(path)?;
+        let mut image = read_rgb(path)?;
+        if let Some(g) = generator.as_mut() {
+            image = g.translate(&image)?;
+        }
         let (w, h) = image.dimensions();
         let calib = calibs.get(i).or(calibs.first());
         let depth = if let Some(d) = args.depth.get(i) {
@@ -164,8 +183,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     bar.finish_and_clear();
     println!(
-        "{n} images at {} mm/h → {} in {:.2} s: {streaks} streaks, {:.2} % of pixels covered on average",
+        "{n} images at {} mm/h{} → {} in {:.2} s: {streaks} streaks, {:.2} % of pixels covered on average",
         args.rate,
+        args.generator
+            .as_ref()
+            .map(|g| format!(" on the translations of {}", g.display()))
+            .unwrap_or_default(),
         args.out.display(),
         started.elapsed().as_secs_f64(),
         100.0 * covered / n.max(1) as f64
