@@ -366,6 +366,13 @@ impl Applier {
         }
     }
 
+    /// True when applying may change kept points or add points (near-range
+    /// returns, range noise or intensity attenuation), not only drop some.
+    pub fn changes_points(&self) -> bool {
+        !self.identity
+            && (self.near_range || self.range_noise_m > 0.0 || self.attenuation_alpha.is_some())
+    }
+
     /// Applies the model to one scan.
     ///
     /// `key` names the scan: it seeds every random draw (with the master
@@ -377,6 +384,50 @@ impl Applier {
         cloud: &PointCloud,
         key: &str,
     ) -> Result<(PointCloud, ApplySummary), InferError> {
+        let mut mask = Vec::new();
+        let (out, summary) = self.apply_masked(cloud, key, &mut mask, true)?;
+        Ok((out.unwrap_or_else(|| cloud.clone()), summary))
+    }
+
+    /// [`Applier::apply`], also giving the vanishing mask: `mask[i]` is 1
+    /// when input point `i` is kept (its row of the output is the kept
+    /// points in order, then the added near-range points).
+    ///
+    /// With `want_cloud` false and a model that only drops points
+    /// ([`Applier::changes_points`] false) the output cloud is not built
+    /// (`None`): the mask says all. This is how `murk apply` copies the kept
+    /// rows of a CSV file byte for byte. The result is the same as
+    /// [`Applier::apply`]'s in every case.
+    ///
+    /// ```
+    /// use murk_infer::{ApplyParams, CoefficientTable, PointCloud, Severity};
+    /// use murk_types::WeatherClass;
+    ///
+    /// # let json = r#"{"format": "weather-noise-coefficients/1", "campaign": "doc",
+    /// #   "lidar": {"model": "VLP16", "range_scale": 1.0},
+    /// #   "weathers": {"fog": {"recordings": 1, "quantile": 0.99, "no_change_rate": null,
+    /// #     "vanishing_slope": [{"reflectivity_min": 0, "reflectivity_max": null, "slope": 0.5, "points": 1}],
+    /// #     "ghost": null, "ring": null}},
+    /// #   "provenance": {"tool": "doc", "inputs_sha256": "", "parameters": {}}}"#;
+    /// let table = CoefficientTable::from_json(json)?;
+    /// let fog = ApplyParams::new(WeatherClass::Fog, Severity::Mor(40.0)).build(&table)?;
+    /// let mut cloud = PointCloud::with_capacity(2);
+    /// cloud.push(10.0, 0.0, 0.0, 50.0, 0); // 10 m: kept (vanishes beyond 0.5 × 40 = 20 m)
+    /// cloud.push(30.0, 0.0, 0.0, 50.0, 0); // 30 m: gone
+    /// let mut mask = Vec::new();
+    /// let (out, summary) = fog.apply_masked(&cloud, "scan", &mut mask, false)?;
+    /// assert_eq!(mask, vec![1, 0]);
+    /// assert!(out.is_none());
+    /// assert_eq!(summary.points_out, 1);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn apply_masked(
+        &self,
+        cloud: &PointCloud,
+        key: &str,
+        mask: &mut Vec<u8>,
+        want_cloud: bool,
+    ) -> Result<(Option<PointCloud>, ApplySummary), InferError> {
         Self::check_cloud(cloud, key)?;
         let mut summary = ApplySummary::empty(key, &self.bands);
         summary.points_in = cloud.len() as u64;
@@ -384,12 +435,13 @@ impl Applier {
             summary.identity = true;
             summary.points_out = cloud.len() as u64;
             // Every point in its band, none vanished.
-            let mut mask = Vec::new();
             let counts = kernel::total(&kernel::hard_mask(
                 &Hard::new(&self.bands, cloud.intensity_scale),
                 cloud,
-                &mut mask,
+                mask,
             ));
+            mask.clear();
+            mask.resize(cloud.len(), 1);
             for (b, (n, _)) in summary
                 .bands
                 .iter_mut()
@@ -399,17 +451,14 @@ impl Applier {
             }
             summary.below_bands = counts.below();
             summary.above_bands = counts.above;
-            return Ok((cloud.clone(), summary));
+            return Ok((want_cloud.then(|| cloud.clone()), summary));
         }
         if !self.extensions.is_empty() {
             return self.apply_extended(cloud, key, summary);
         }
         let seed = ScanSeed::new(self.seed, key);
-        let mut mask = Vec::new();
-        let chunks = self.vanish(cloud, key, &mut mask);
+        let chunks = self.vanish(cloud, key, mask);
         let counts = kernel::total(&chunks);
-        let mut out = kernel::compact(cloud, &mask, &chunks);
-        drop(mask);
         summary.vanished = counts.n - counts.kept;
         for (b, (n, kept)) in summary
             .bands
@@ -421,6 +470,11 @@ impl Applier {
         }
         summary.below_bands = counts.below();
         summary.above_bands = counts.above;
+        if !want_cloud && !self.changes_points() {
+            summary.points_out = counts.kept;
+            return Ok((None, summary));
+        }
+        let mut out = kernel::compact(cloud, mask, &chunks);
 
         let sigma = (self.range_noise_m > 0.0).then_some(self.range_noise_m);
         if sigma.is_some() || self.attenuation_alpha.is_some() {
@@ -444,7 +498,7 @@ impl Applier {
             )?;
         }
         summary.points_out = out.len() as u64;
-        Ok((out, summary))
+        Ok((Some(out), summary))
     }
 
     /// Adds the ghost and ring returns of `laws` to `out` (rays of `cloud`)

@@ -13,15 +13,17 @@
 //!   scan's output does not depend on where the batch lives or what else is
 //!   in it.
 //! - Same format in and out: intensities are written in the input's scale,
-//!   untouched points bit for bit. Another format: intensities are converted
+//!   untouched points bit for bit. CSV to CSV goes further (see
+//!   [`run_job`]): kept rows are copied byte for byte, header and extra
+//!   columns included. Another format: intensities are converted
 //!   to the output format's default scale, so that reading the output with
 //!   default options gives the same reflectivities.
 
 use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 
-use murk_io::{PcdData, ReadOptions, WriteOptions};
-use murk_types::PointFormat;
+use murk_io::{CsvNeeds, PcdData, ReadOptions, RowEdit, WriteOptions};
+use murk_types::{PointCloud, PointFormat};
 use rayon::prelude::*;
 use serde::Serialize;
 
@@ -337,6 +339,18 @@ pub fn plan(inputs: &[PathBuf], out_dir: &Path, opts: &BatchOptions) -> Result<P
 }
 
 /// Runs one job: read, apply, write.
+///
+/// **CSV to CSV** is row-preserving and parallel inside the file: the file
+/// is read once, its rows parsed in pieces in parallel, only the columns the
+/// model uses decoded (x, y, z, intensity; ring and time too with near-range
+/// returns), and the output is the input's header and kept rows **byte for
+/// byte** (extra columns, number spelling and line breaks kept). Rows whose
+/// point the model changed (near-range replacement, range noise,
+/// attenuation) get new x, y, z and intensity cells and keep the others;
+/// added near-range returns are appended with empty cells in the columns
+/// murk does not know. Cells of columns the model does not use are copied,
+/// not checked. Files with quoted data cells take the general path (read,
+/// apply, write `x,y,z,intensity,ring[,time]`).
 pub fn run_job(
     applier: &Applier,
     job: &Job,
@@ -344,6 +358,12 @@ pub fn run_job(
 ) -> Result<FileReport, InferError> {
     let mut read = opts.read.clone();
     read.format = Some(job.format_in);
+    if job.format_in == PointFormat::Csv
+        && job.format_out == PointFormat::Csv
+        && let Some(report) = run_csv_rows(applier, job, &read)?
+    {
+        return Ok(report);
+    }
     let cloud = murk_io::read_cloud(&job.input, &read)?;
     let (mut out, summary) = applier.apply(&cloud, &job.key)?;
     drop(cloud);
@@ -360,6 +380,80 @@ pub fn run_job(
         output: job.output.clone(),
         summary,
     })
+}
+
+/// The row-preserving CSV path of [`run_job`]; `None` when the file has
+/// quoted data cells.
+fn run_csv_rows(
+    applier: &Applier,
+    job: &Job,
+    read: &ReadOptions,
+) -> Result<Option<FileReport>, InferError> {
+    let bytes = std::fs::read(&job.input).map_err(|source| InferError::Fs {
+        path: job.input.clone(),
+        action: "read",
+        source,
+    })?;
+    let needs = CsvNeeds {
+        ring: applier.near_range,
+        time: applier.near_range,
+    };
+    let Some(rows) = murk_io::parse_csv_rows(&bytes, &job.input, read, needs)? else {
+        return Ok(None);
+    };
+    let mut mask = Vec::new();
+    let (out, summary) = applier.apply_masked(&rows.cloud, &job.key, &mut mask, false)?;
+    let (edits, added) = match &out {
+        Some(out) => changed_rows(&rows.cloud, &mask, out),
+        None => (Vec::new(), None),
+    };
+    let encoded = rows.encode_subset(&bytes, &mask, &edits, added.as_ref());
+    drop(bytes);
+    write_atomic(&job.output, &encoded)?;
+    Ok(Some(FileReport {
+        input: job.input.clone(),
+        output: job.output.clone(),
+        summary,
+    }))
+}
+
+/// The kept input points whose x, y, z or intensity `out` changed (bit
+/// comparison), and the points `out` adds after the kept ones.
+fn changed_rows(
+    input: &PointCloud,
+    mask: &[u8],
+    out: &PointCloud,
+) -> (Vec<RowEdit>, Option<PointCloud>) {
+    let mut edits = Vec::new();
+    let mut j = 0usize;
+    for (i, &m) in mask.iter().enumerate() {
+        if m == 0 {
+            continue;
+        }
+        let new = [out.x[j], out.y[j], out.z[j], out.intensity[j]];
+        let old = [input.x[i], input.y[i], input.z[i], input.intensity[i]];
+        if new
+            .iter()
+            .zip(&old)
+            .any(|(a, b)| a.to_bits() != b.to_bits())
+        {
+            edits.push(RowEdit {
+                row: i,
+                values: new,
+            });
+        }
+        j += 1;
+    }
+    let added = (j < out.len()).then(|| PointCloud {
+        x: out.x[j..].to_vec(),
+        y: out.y[j..].to_vec(),
+        z: out.z[j..].to_vec(),
+        intensity: out.intensity[j..].to_vec(),
+        ring: out.ring[j..].to_vec(),
+        time: out.time.as_ref().map(|t| t[j..].to_vec()),
+        intensity_scale: out.intensity_scale,
+    });
+    (edits, added)
 }
 
 /// Runs every job of `plan` in parallel; `progress` is called once per

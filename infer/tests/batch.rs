@@ -253,3 +253,123 @@ fn output_folder_inside_the_input_folder_is_not_read_back() {
     assert_eq!(p2.jobs.len(), 2);
     assert!(p2.skipped.iter().any(|s| s.reason == "the output folder"));
 }
+
+/// A CSV scan the way other tools write one: extra columns around murk's,
+/// `54.0`-style numbers, CRLF line breaks.
+fn foreign_csv(cloud: &PointCloud) -> String {
+    let mut s = String::from("id,x,y,z,intensity,ring,label\r\n");
+    for i in 0..cloud.len() {
+        s.push_str(&format!(
+            "{i},{:.6},{:.6},{:.6},{:.1},{},p{i}\r\n",
+            cloud.x[i], cloud.y[i], cloud.z[i], cloud.intensity[i], cloud.ring[i]
+        ));
+    }
+    s
+}
+
+#[test]
+fn csv_to_csv_keeps_the_rows_the_model_keeps_byte_for_byte() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("scan.csv");
+    // ~1.6 MB: several parse pieces.
+    let text = foreign_csv(&scan(30_000, 5));
+    std::fs::write(&input, &text).unwrap();
+    let a = ApplyParams::new(WeatherClass::Fog, Severity::Mor(60.0))
+        .build(&seed_table())
+        .unwrap();
+    let out = dir.path().join("out");
+    let p = plan(std::slice::from_ref(&input), &out, &BatchOptions::default()).unwrap();
+    let report = run(&a, &p, &BatchOptions::default(), &|_| {}).unwrap();
+    // The model's own decision on the cloud as read.
+    let cloud = read_cloud(&input, &ReadOptions::default()).unwrap();
+    let mut mask = Vec::new();
+    let kept = a.mask(&cloud, "scan.csv", &mut mask).unwrap();
+    assert!(
+        kept > 1_000 && (kept as usize) < cloud.len() - 1_000,
+        "{kept}"
+    );
+    let mut want = String::from("id,x,y,z,intensity,ring,label\r\n");
+    for (line, &m) in text.split_inclusive("\r\n").skip(1).zip(&mask) {
+        if m == 1 {
+            want.push_str(line);
+        }
+    }
+    assert_eq!(std::fs::read_to_string(out.join("scan.csv")).unwrap(), want);
+    let t = &report.totals;
+    assert_eq!((t.points_in, t.points_out), (30_000, kept));
+}
+
+#[test]
+fn csv_to_csv_with_near_range_and_noise_equals_the_general_path() {
+    // A murk-written CSV (with time): the row-preserving path must give the
+    // bytes the general path (read, apply, write) gives.
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("scan.csv");
+    let cloud = synthetic_scan(20_000, 9);
+    write_cloud(&input, &cloud, PointFormat::Csv).unwrap();
+    let a = fog(40.0);
+    let out = dir.path().join("out");
+    let p = plan(std::slice::from_ref(&input), &out, &BatchOptions::default()).unwrap();
+    let report = run(&a, &p, &BatchOptions::default(), &|_| {}).unwrap();
+    let (general, summary) = a
+        .apply(
+            &read_cloud(&input, &ReadOptions::default()).unwrap(),
+            "scan.csv",
+        )
+        .unwrap();
+    let want = dir.path().join("general.csv");
+    write_cloud(&want, &general, PointFormat::Csv).unwrap();
+    assert_eq!(
+        std::fs::read_to_string(out.join("scan.csv")).unwrap(),
+        std::fs::read_to_string(&want).unwrap()
+    );
+    assert_eq!(report.files[0].summary, summary);
+    let g = summary.ghost.as_ref().unwrap();
+    assert!(g.replaced + g.added > 0, "{g:?}");
+}
+
+#[test]
+fn csv_output_bytes_do_not_depend_on_thread_count() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("in");
+    std::fs::create_dir_all(&input).unwrap();
+    std::fs::write(input.join("a.csv"), foreign_csv(&scan(25_000, 3))).unwrap();
+    write_cloud(
+        &input.join("b.csv"),
+        &synthetic_scan(25_000, 4),
+        PointFormat::Csv,
+    )
+    .unwrap();
+    let mut outputs = Vec::new();
+    for threads in [1, 2] {
+        let out = dir.path().join(format!("out{threads}"));
+        let p = plan(std::slice::from_ref(&input), &out, &BatchOptions::default()).unwrap();
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| run(&fog(30.0), &p, &BatchOptions::default(), &|_| {}).unwrap());
+        outputs.push(["a.csv", "b.csv"].map(|n| std::fs::read(out.join(n)).unwrap()));
+    }
+    assert!(outputs[0][0].len() > 10_000);
+    assert_eq!(outputs[0], outputs[1]);
+}
+
+#[test]
+fn csv_bad_row_error_names_file_line_and_column() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("bad.csv");
+    let mut text = foreign_csv(&scan(20_000, 6));
+    text = text.replacen("\r\n12345,", "\r\n12345,oops", 1);
+    std::fs::write(&input, &text).unwrap();
+    let out = dir.path().join("out");
+    let p = plan(std::slice::from_ref(&input), &out, &BatchOptions::default()).unwrap();
+    let e = run(&fog(30.0), &p, &BatchOptions::default(), &|_| {}).unwrap_err();
+    let msg = e.to_string();
+    // Header on line 1: point 12345 is on line 12347.
+    assert!(
+        msg.contains("bad.csv") && msg.contains("line 12347") && msg.contains("column x"),
+        "{msg}"
+    );
+    assert!(!out.join("bad.csv").exists());
+}

@@ -362,7 +362,7 @@ fn no_change(clear: &PointCloud, other: &PointCloud, res: f64) -> [(u64, u64); 2
 }
 
 #[test]
-fn round_trip_generator_fit_apply_matches_the_degraded_recordings() {
+fn round_trip_generator_fit_apply_matches_the_degraded_recordings_in_fog_rain_and_snow() {
     let dir = tempfile::tempdir().unwrap();
     let camp = dir.path().join("camp");
     let o = murk(&[
@@ -393,66 +393,94 @@ fn round_trip_generator_fit_apply_matches_the_degraded_recordings() {
         .as_f64()
         .unwrap();
     let recs = truth["recordings"].as_array().unwrap();
-    let pick = |class: &str| -> Vec<(String, f64)> {
+    // (id, MOR, rain rate) of the usable recordings of a class.
+    let pick = |class: &str| -> Vec<(String, f64, Option<f64>)> {
         recs.iter()
             .filter(|r| r["class"] == class && r["review_keep"] == true && r["fault"].is_null())
             .map(|r| {
                 (
                     r["id"].as_str().unwrap().to_string(),
                     r["mor_m"].as_f64().unwrap(),
+                    r["rain_rate_mm_h"].as_f64(),
                 )
             })
             .collect()
     };
     let clear = pick("clear");
-    let fog = pick("fog");
-    assert!(!clear.is_empty() && fog.len() >= 4, "{clear:?} {fog:?}");
+    assert!(!clear.is_empty(), "{clear:?}");
     let lidar = |id: &str| camp.join("lidar").join(format!("{id}.pcd"));
     let clear_path = lidar(&clear[0].0);
     let clear_cloud = read_cloud(&clear_path, &ReadOptions::default()).unwrap();
 
-    let (mut measured, mut simulated) = ([(0u64, 0u64); 2], [(0u64, 0u64); 2]);
-    for (i, (id, mor)) in fog.iter().enumerate() {
-        let out = dir.path().join(format!("sim{i}"));
-        let o = murk(&[
-            "apply",
-            "--coefficients",
-            table.to_str().unwrap(),
-            "--weather",
-            "fog",
-            "--mor",
-            &mor.to_string(),
-            clear_path.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-            "--soft-edge",
-            "--seed",
-            &i.to_string(),
-        ]);
-        assert!(o.status.success(), "murk apply: {}", text(&o.stderr));
-        let sim = read_cloud(
-            &out.join(clear_path.file_name().unwrap()),
-            &ReadOptions::default(),
-        )
-        .unwrap();
-        let real = read_cloud(&lidar(id), &ReadOptions::default()).unwrap();
-        for (acc, other) in [(&mut measured, &real), (&mut simulated, &sim)] {
-            for (b, (n, k)) in no_change(&clear_cloud, other, res).iter().enumerate() {
-                acc[b].0 += n;
-                acc[b].1 += k;
+    // Fog and snow at each recording's MOR; rain at its gauge's rain rate,
+    // through the table's rate → MOR conversion (clamped into its validity
+    // when a light shower lies just outside it). The tolerance is the
+    // largest gap allowed between measured and simulated no-change rates:
+    // rain's is wider because the conversion's scatter (the fit's residual
+    // MOR error, several metres) adds to the vanishing model's.
+    for (class, tolerance, min_recordings) in
+        [("fog", 0.05, 4), ("rain", 0.06, 4), ("snow", 0.05, 2)]
+    {
+        let recordings = pick(class);
+        assert!(
+            recordings.len() >= min_recordings,
+            "{class}: {recordings:?}"
+        );
+        let (mut measured, mut simulated) = ([(0u64, 0u64); 2], [(0u64, 0u64); 2]);
+        for (i, (id, mor, rate)) in recordings.iter().enumerate() {
+            let out = dir.path().join(format!("sim-{class}{i}"));
+            let severity = match (class, rate) {
+                ("rain", Some(r)) => {
+                    vec!["--rain-rate".to_string(), r.to_string(), "--clamp".into()]
+                }
+                _ => vec!["--mor".to_string(), mor.to_string()],
+            };
+            let seed = i.to_string();
+            let mut args = vec![
+                "apply",
+                "--coefficients",
+                table.to_str().unwrap(),
+                "--weather",
+                class,
+                clear_path.to_str().unwrap(),
+                "--out",
+                out.to_str().unwrap(),
+                "--soft-edge",
+                "--seed",
+                &seed,
+            ];
+            args.extend(severity.iter().map(String::as_str));
+            let o = murk(&args);
+            assert!(
+                o.status.success(),
+                "murk apply {class}: {}",
+                text(&o.stderr)
+            );
+            let sim = read_cloud(
+                &out.join(clear_path.file_name().unwrap()),
+                &ReadOptions::default(),
+            )
+            .unwrap();
+            let real = read_cloud(&lidar(id), &ReadOptions::default()).unwrap();
+            for (acc, other) in [(&mut measured, &real), (&mut simulated, &sim)] {
+                for (b, (n, k)) in no_change(&clear_cloud, other, res).iter().enumerate() {
+                    acc[b].0 += n;
+                    acc[b].1 += k;
+                }
             }
         }
-    }
-    for b in 0..2 {
-        let m = measured[b].1 as f64 / measured[b].0 as f64;
-        let s = simulated[b].1 as f64 / simulated[b].0 as f64;
-        println!(
-            "band {b}: measured no-change {m:.3}, simulated {s:.3} ({} clear returns)",
-            measured[b].0
-        );
-        assert!(
-            (m - s).abs() < 0.05,
-            "band {b}: measured {m:.3} vs simulated {s:.3}"
-        );
+        for b in 0..2 {
+            let m = measured[b].1 as f64 / measured[b].0 as f64;
+            let s = simulated[b].1 as f64 / simulated[b].0 as f64;
+            println!(
+                "{class} band {b}: measured no-change {m:.3}, simulated {s:.3} ({} recordings, {} clear returns)",
+                recordings.len(),
+                measured[b].0
+            );
+            assert!(
+                (m - s).abs() < tolerance,
+                "{class} band {b}: measured {m:.3} vs simulated {s:.3}"
+            );
+        }
     }
 }

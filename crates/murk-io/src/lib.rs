@@ -83,7 +83,7 @@ pub use options::{PcdData, ReadOptions, WriteOptions};
 pub use pcd::parse_pcd;
 #[cfg(feature = "parquet")]
 pub use table::parse_parquet;
-pub use text::parse_csv;
+pub use text::{CsvNeeds, CsvRows, RowEdit, RowPiece, parse_csv, parse_csv_rows};
 
 /// The ring lookup for a read: `opts.lidar`, else the VLP-16.
 pub(crate) fn ring_lookup(source: &Path, opts: &ReadOptions) -> Result<ring::RingLookup, IoError> {

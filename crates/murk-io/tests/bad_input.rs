@@ -153,6 +153,54 @@ fn kitti_non_finite_intensity_far_into_the_file_names_the_point() {
 }
 
 #[test]
+fn the_first_bad_point_is_named_when_later_pieces_are_bad_too() {
+    // 300k points: several parallel decode pieces. Bad values in a later
+    // piece (x), an earlier one (ring, z) and the same point twice: the error
+    // is the first bad value in file order, whatever the thread count.
+    let n = 300_000;
+    let mut pts: Vec<f32> = (0..5 * n)
+        .map(|i| if i % 5 == 4 { 3.0 } else { 1.0 })
+        .collect();
+    pts[5 * 250_000] = f32::NAN;
+    pts[5 * 70_001 + 4] = 2.5;
+    pts[5 * 70_001 + 2] = f32::INFINITY;
+    pts[5 * 70_002 + 3] = f32::NAN;
+    let bytes = f32s(&pts);
+    for threads in [1, 2, 3] {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        let (e, msg) = pool.install(|| read_err("far.pcd.bin", &bytes));
+        assert!(
+            matches!(
+                e,
+                IoError::NonFinite {
+                    point: 70_001,
+                    field: "z",
+                    ..
+                }
+            ),
+            "{threads} threads: {msg}"
+        );
+    }
+    // Only the fractional ring left: it is named.
+    pts[5 * 70_001 + 2] = 1.0;
+    let (e, msg) = read_err("far.pcd.bin", &f32s(&pts));
+    assert!(
+        matches!(
+            e,
+            IoError::BadValue {
+                point: 70_001,
+                field: "ring",
+                ..
+            }
+        ),
+        "{msg}"
+    );
+}
+
+#[test]
 fn nuscenes_fractional_ring_index_is_refused() {
     let b = f32s(&[1.0, 2.0, 3.0, 10.0, 4.0, 1.0, 2.0, 3.0, 10.0, 4.5]);
     let (e, msg) = read_err("lidar.pcd.bin", &b);
