@@ -384,6 +384,12 @@ impl Applier {
         cloud: &PointCloud,
         key: &str,
     ) -> Result<(PointCloud, ApplySummary), InferError> {
+        if !self.identity && !self.extensions.is_empty() {
+            Self::check_cloud(cloud, key)?;
+            let mut summary = ApplySummary::empty(key, &self.bands);
+            summary.points_in = cloud.len() as u64;
+            return self.apply_extended(cloud, key, summary);
+        }
         let mut mask = Vec::new();
         let (out, summary) = self.apply_masked(cloud, key, &mut mask, true)?;
         Ok((out.unwrap_or_else(|| cloud.clone()), summary))
@@ -454,7 +460,11 @@ impl Applier {
             return Ok((want_cloud.then(|| cloud.clone()), summary));
         }
         if !self.extensions.is_empty() {
-            return self.apply_extended(cloud, key, summary);
+            // Extension terms move and rescale returns per point: there is no
+            // mask-only form of them; callers use `apply`.
+            return Err(InferError::Conflict(
+                "apply_masked does not apply extension terms; use apply".into(),
+            ));
         }
         let seed = ScanSeed::new(self.seed, key);
         let chunks = self.vanish(cloud, key, mask);

@@ -360,6 +360,7 @@ pub fn run_job(
     read.format = Some(job.format_in);
     if job.format_in == PointFormat::Csv
         && job.format_out == PointFormat::Csv
+        && (applier.identity || applier.extensions.is_empty())
         && let Some(report) = run_csv_rows(applier, job, &read)?
     {
         return Ok(report);
