@@ -278,13 +278,7 @@ impl Applier {
     /// The vanishing distance (metres) of a return of calibrated
     /// reflectivity `reflectivity` (clamped into the lowest / highest band).
     pub fn vanishing_distance_m(&self, reflectivity: f64) -> f64 {
-        let mut d = self.bands[0].vanishing_distance_m;
-        for b in &self.bands[1..] {
-            if reflectivity >= b.reflectivity_min {
-                d = b.vanishing_distance_m;
-            }
-        }
-        d
+        self.bands[self.band_index(reflectivity)].vanishing_distance_m
     }
 
     /// What is applied, for reports.

@@ -71,8 +71,9 @@ fn point_value(
 }
 
 impl Applier {
-    /// The band index of a calibrated reflectivity.
-    fn band_index(&self, reflectivity: f64) -> usize {
+    /// The band index of a calibrated reflectivity (clamped into the lowest
+    /// and highest band).
+    pub(crate) fn band_index(&self, reflectivity: f64) -> usize {
         let mut k = 0;
         for (i, b) in self.bands.iter().enumerate().skip(1) {
             if reflectivity >= b.reflectivity_min {

@@ -13,10 +13,10 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use murk_campaign::{Campaign, Cell};
-use murk_fit::driver::{FitInputs, RecordingInput, build_reference, read_lidar};
+use murk_fit::FitValidParams;
+use murk_fit::driver::{FitInputs, RecordingInput, read_lidar};
 use murk_fit::pairing::pair_recording_detailed;
-use murk_fit::reference::{CellGrid, ClearReference};
-use murk_fit::{FitError, FitValidParams};
+use murk_fit::reference::{CellGrid, CellImage, CellPoint, ClearReference, cell_points};
 use murk_io::ReadOptions;
 use murk_types::{CovariateValue, LidarSpec, PointCloud, PointCovariates, WeatherClass};
 use rayon::prelude::*;
@@ -95,6 +95,8 @@ pub struct ClearRec {
     pub order: usize,
     /// The point-cloud file.
     pub lidar: PathBuf,
+    /// Its points, calibrated reflectivity (the input of the simulations).
+    pub cloud: PointCloud,
 }
 
 /// A campaign read for one weather.
@@ -119,13 +121,6 @@ pub struct Loaded {
     pub inputs: FitInputs,
     /// Recordings of the weather left out, with the reason.
     pub skipped: Vec<(String, String)>,
-}
-
-fn fit_err(e: FitError) -> DiagnoseError {
-    DiagnoseError::Read {
-        path: PathBuf::from("(campaign)"),
-        reason: e.to_string(),
-    }
 }
 
 /// Reflectivity below which the log ratio is floored.
@@ -201,14 +196,37 @@ pub fn load(
                 .into(),
         });
     }
-    let (reference, _) = build_reference(&inputs, &clear_in, &grid, params).map_err(fit_err)?;
-    // What pairing does to range and reflectivity in clear weather, per cell.
-    type CellOffsets = Vec<(u32, f64, f64)>;
-    let offsets: Vec<Result<CellOffsets, DiagnoseError>> = clear_in
+    // Each clear recording is read once: its cloud is kept for the
+    // simulations, its cell points build the reference (as murk-fit's
+    // `build_reference` does) and are paired for the per-cell offsets.
+    let read: Vec<Result<(PointCloud, Vec<CellPoint>), DiagnoseError>> = clear_in
         .par_iter()
         .map(|r| {
-            let (points, _, pairs) = read_and_pair(r, &spec, &reference, params)?;
-            Ok(pairs
+            let cloud = read_calibrated(&r.lidar, &spec)?;
+            let points = cell_points(&grid, &cloud, &r.lidar).map_err(|e| DiagnoseError::Read {
+                path: r.lidar.clone(),
+                reason: e.to_string(),
+            })?;
+            Ok((cloud, points))
+        })
+        .collect();
+    let (clear_clouds, clear_points): (Vec<PointCloud>, Vec<Vec<CellPoint>>) = read
+        .into_iter()
+        .collect::<Result<Vec<_>, _>>()?
+        .into_iter()
+        .unzip();
+    let images: Vec<CellImage> = clear_points
+        .iter()
+        .map(|p| CellImage::from_points(p, grid.cells()))
+        .collect();
+    let reference = ClearReference::build(grid.clone(), &images, params);
+    drop(images);
+    // What pairing does to range and reflectivity in clear weather, per cell.
+    let offsets: Vec<Vec<(u32, f64, f64)>> = clear_points
+        .par_iter()
+        .map(|points| {
+            let (_, pairs) = pair_recording_detailed(&reference, points, params);
+            pairs
                 .iter()
                 .map(|p| {
                     let q = points[p.point as usize];
@@ -219,12 +237,13 @@ pub fn load(
                         log_ratio(q.reflectivity as f64, reference.reflectivity(c) as f64),
                     )
                 })
-                .collect())
+                .collect()
         })
         .collect();
+    drop(clear_points);
     let mut off = vec![(0.0f64, 0.0f64, 0u32); grid.cells()];
     for o in offsets {
-        for (c, dr, dl) in o? {
+        for (c, dr, dl) in o {
             let e = &mut off[c as usize];
             e.0 += dr;
             e.1 += dl;
@@ -260,7 +279,9 @@ pub fn load(
     }
     let clear: Vec<ClearRec> = clear_in
         .iter()
-        .map(|r| ClearRec {
+        .zip(clear_clouds)
+        .map(|(r, cloud)| ClearRec {
+            cloud,
             id: r.id.clone(),
             order: order.get(r.id.as_str()).copied().unwrap_or(0),
             lidar: r.lidar.clone(),

@@ -250,7 +250,7 @@ fn simulate(
     fit_params: &FitValidParams,
 ) -> Result<(f64, SceneMetrics), DiagnoseError> {
     let clear_rec = &loaded.clear[rec.clear];
-    let clear = read_calibrated(&clear_rec.lidar, &loaded.spec)?;
+    let clear = &clear_rec.cloud;
     let measured = xyz(&read_calibrated(&rec.lidar, &loaded.spec)?);
     let grid = loaded.reference.grid();
     let mut near = 0.0;
@@ -263,7 +263,7 @@ fn simulate(
     let n = opts.sims.max(1);
     for s in 0..n {
         let key = format!("{}#{s}", rec.id);
-        let (out, _) = ap.apply(&clear, &key).map_err(|e| DiagnoseError::Infer {
+        let (out, _) = ap.apply(clear, &key).map_err(|e| DiagnoseError::Infer {
             what: format!("recording {}", rec.id),
             source: Box::new(e),
         })?;

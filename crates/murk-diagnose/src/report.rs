@@ -156,17 +156,17 @@ impl FigureData {
         seed: u64,
     ) -> Result<FigureData, DiagnoseError> {
         let rec = &loaded.recs[j];
-        let clear = read_calibrated(&loaded.clear[rec.clear].lidar, &loaded.spec)?;
+        let clear = &loaded.clear[rec.clear].cloud;
         let ap = applier(table, loaded, rec, true, seed)?;
         let (out, _) = ap
-            .apply(&clear, &format!("{}#figure", rec.id))
+            .apply(clear, &format!("{}#figure", rec.id))
             .map_err(|e| DiagnoseError::Infer {
                 what: format!("recording {}", rec.id),
                 source: Box::new(e),
             })?;
         Ok(FigureData {
             recording: rec.id.clone(),
-            clear: xyz(&clear),
+            clear: xyz(clear),
             simulated: xyz(&out),
             measured: xyz(&read_calibrated(&rec.lidar, &loaded.spec)?),
         })

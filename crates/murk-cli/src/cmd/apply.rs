@@ -15,11 +15,9 @@
 //! the input's format or `--format`. Nothing is written when an output would
 //! overwrite an input.
 
-use std::io::IsTerminal as _;
 use std::path::PathBuf;
 
 use anyhow::{Context, bail};
-use indicatif::{ProgressBar, ProgressStyle};
 use murk_infer::batch;
 use murk_infer::{ApplyParams, ApplySummary, BatchOptions, Severity, SlopeSource};
 use murk_io::{PcdData, ReadOptions};
@@ -193,15 +191,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         eprintln!("murk: skipped {}: {}", s.path.display(), s.reason);
     }
 
-    let bar = if std::io::stderr().is_terminal() {
-        ProgressBar::new(plan.jobs.len() as u64)
-    } else {
-        ProgressBar::hidden()
-    };
-    bar.set_style(
-        ProgressStyle::with_template("{bar:40} {pos}/{len} files {elapsed} (eta {eta}) {msg}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
+    let bar = super::progress_bar(plan.jobs.len(), "files", false);
     let report = batch::run(&applier, &plan, &opts, &|f| {
         bar.set_message(f.summary.scan.clone());
         bar.inc(1);

@@ -10,11 +10,10 @@
 //! ```
 
 use std::collections::BTreeMap;
-use std::io::IsTerminal as _;
+
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, bail};
-use indicatif::{ProgressBar, ProgressStyle};
 use murk_infer::camera::{Generator, GeneratorParams, TranslateTimes, read_rgb, write_rgb_atomic};
 
 /// Arguments of `murk camera`.
@@ -161,15 +160,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("{}: cannot create the output folder", args.out.display()))?;
     let n = images.len();
-    let bar = if args.quiet || !std::io::stderr().is_terminal() {
-        ProgressBar::hidden()
-    } else {
-        ProgressBar::new(n as u64)
-    };
-    bar.set_style(
-        ProgressStyle::with_template("{bar:40} {pos}/{len} images {elapsed}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
+    let bar = super::progress_bar(n, "images", args.quiet);
     let started = std::time::Instant::now();
     let mut times = TranslateTimes::default();
     let mut pixels = 0u64;

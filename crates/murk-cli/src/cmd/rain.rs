@@ -17,11 +17,9 @@
 //!           nuscenes.jpg --depth nuscenes-depth.png --out hybrid/
 //! ```
 
-use std::io::IsTerminal as _;
 use std::path::PathBuf;
 
 use anyhow::{Context as _, bail};
-use indicatif::{ProgressBar, ProgressStyle};
 use murk_infer::camera::{Densify, DepthMap, KittiCalib, RainParams, read_rgb, write_rgb_atomic};
 use murk_io::{ReadOptions, read_cloud};
 
@@ -135,15 +133,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let base = RainParams::new(args.rate)
         .exposure_s(args.exposure)
         .ego_speed_m_s(args.ego_speed);
-    let bar = if args.quiet || !std::io::stderr().is_terminal() {
-        ProgressBar::hidden()
-    } else {
-        ProgressBar::new(n as u64)
-    };
-    bar.set_style(
-        ProgressStyle::with_template("{bar:40} {pos}/{len} images {elapsed}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
+    let bar = super::progress_bar(n, "images", args.quiet);
     let (mut streaks, mut covered) = (0u64, 0.0f64);
     let started = std::time::Instant::now();
     for (i, path) in args.images.iter().enumerate() {
