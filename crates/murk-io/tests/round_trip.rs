@@ -249,3 +249,68 @@ proptest! {
         prop_assert_eq!(&back, &cloud);
     }
 }
+
+/// Reads reuse a per-thread buffer, and a read nested inside another file's
+/// parallel decode (rayon work stealing) must take its own: files of several
+/// sizes and formats read concurrently, many times, give exactly what a
+/// sequential read gives, and a small or empty file read after a large one
+/// sees none of the large one's bytes.
+#[test]
+fn concurrent_reads_equal_sequential_reads() {
+    use rayon::prelude::*;
+    let dir = tempfile::tempdir().unwrap();
+    let mut paths = Vec::new();
+    for (k, n) in [150_000usize, 70_000, 3_000, 200_000]
+        .into_iter()
+        .enumerate()
+    {
+        let cloud = synthetic(n, k % 2 == 0);
+        for (format, data) in [
+            (PointFormat::Pcd, PcdData::Binary),
+            (PointFormat::Pcd, PcdData::BinaryCompressed),
+            (PointFormat::KittiBin, PcdData::Binary),
+            (PointFormat::NuscenesBin, PcdData::Binary),
+        ] {
+            let path = dir
+                .path()
+                .join(format!("scan{k}-{data}.{}", format.extension()));
+            write_cloud_with(
+                &path,
+                &cloud,
+                &WriteOptions {
+                    format,
+                    pcd_data: data,
+                },
+            )
+            .unwrap();
+            paths.push(path);
+        }
+    }
+    let opts = ReadOptions::default();
+    let sequential: Vec<PointCloud> = paths
+        .iter()
+        .map(|p| read_cloud(p, &opts).unwrap())
+        .collect();
+    for _ in 0..4 {
+        let parallel: Vec<PointCloud> = paths
+            .par_iter()
+            .map(|p| read_cloud(p, &opts).unwrap())
+            .collect();
+        assert_eq!(parallel, sequential);
+    }
+    // Largest file first, then a short one and an empty one on this thread.
+    let big = read_cloud(&paths[12], &opts).unwrap();
+    assert_eq!(big.len(), 200_000);
+    let short = dir.path().join("short.bin");
+    std::fs::write(&short, [0u8; 17]).unwrap();
+    let err = read_cloud(&short, &opts).unwrap_err().to_string();
+    assert!(
+        err.contains("short.bin") && err.contains("1 trailing"),
+        "{err}"
+    );
+    let empty = dir.path().join("empty.bin");
+    std::fs::write(&empty, []).unwrap();
+    let err = read_cloud(&empty, &opts).unwrap_err().to_string();
+    assert!(err.contains("empty.bin") && err.contains("empty"), "{err}");
+    assert_eq!(read_cloud(&paths[10], &opts).unwrap(), sequential[10]);
+}
