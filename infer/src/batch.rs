@@ -390,27 +390,35 @@ fn run_csv_rows(
     job: &Job,
     read: &ReadOptions,
 ) -> Result<Option<FileReport>, InferError> {
-    let bytes = std::fs::read(&job.input).map_err(|source| InferError::Fs {
-        path: job.input.clone(),
-        action: "read",
-        source,
-    })?;
     let needs = CsvNeeds {
         ring: applier.near_range,
         time: applier.near_range,
     };
-    let Some(rows) = murk_io::parse_csv_rows(&bytes, &job.input, read, needs)? else {
+    // The file's bytes stay in murk-io's per-thread read buffer; kept rows
+    // are streamed from them to the output file.
+    let summary = murk_io::with_file_bytes(&job.input, |bytes| {
+        let Some(rows) = murk_io::parse_csv_rows(bytes, &job.input, read, needs)? else {
+            return Ok(None);
+        };
+        let mut mask = Vec::new();
+        let (out, summary) = applier.apply_masked(&rows.cloud, &job.key, &mut mask, false)?;
+        let (edits, added) = match &out {
+            Some(out) => changed_rows(&rows.cloud, &mask, out),
+            None => (Vec::new(), None),
+        };
+        murk_types::write_atomic_with(&job.output, |w| {
+            rows.write_subset(bytes, &mask, &edits, added.as_ref(), w)
+        })
+        .map_err(|e| InferError::Fs {
+            path: job.output.clone(),
+            action: e.action,
+            source: e.source,
+        })?;
+        Ok::<_, InferError>(Some(summary))
+    })??;
+    let Some(summary) = summary else {
         return Ok(None);
     };
-    let mut mask = Vec::new();
-    let (out, summary) = applier.apply_masked(&rows.cloud, &job.key, &mut mask, false)?;
-    let (edits, added) = match &out {
-        Some(out) => changed_rows(&rows.cloud, &mask, out),
-        None => (Vec::new(), None),
-    };
-    let encoded = rows.encode_subset(&bytes, &mask, &edits, added.as_ref());
-    drop(bytes);
-    write_atomic(&job.output, &encoded)?;
     Ok(Some(FileReport {
         input: job.input.clone(),
         output: job.output.clone(),

@@ -111,13 +111,15 @@ thread_local! {
     static READ_BUFFER: std::cell::RefCell<Vec<u8>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
-/// Reads the whole file and calls `f` on its bytes.
+/// Reads the whole file at `path` and calls `f` on its bytes (for callers
+/// that parse and then copy parts of the file, as `murk apply` does with
+/// CSV rows).
 ///
 /// The bytes live in this thread's reusable buffer. A nested call on the same
 /// thread (rayon may run another file's read inside `f` while it waits for
 /// its own parallel decode) finds the buffer in use and reads into a fresh
 /// one instead.
-fn with_file_bytes<R>(path: &Path, f: impl FnOnce(&[u8]) -> R) -> Result<R, IoError> {
+pub fn with_file_bytes<R>(path: &Path, f: impl FnOnce(&[u8]) -> R) -> Result<R, IoError> {
     let io = |source| IoError::Io {
         path: path.to_path_buf(),
         action: "read",

@@ -176,21 +176,38 @@ pub struct RowEdit {
     pub values: [f32; 4],
 }
 
-/// Iterates the data rows in `bytes` (blank lines skipped), each with its
-/// line break.
-fn rows_in(bytes: &[u8]) -> impl Iterator<Item = &[u8]> {
-    let mut pos = 0;
+/// The byte ranges of the data rows in `bytes[range]` (blank lines
+/// skipped), each with its line break.
+fn row_spans(bytes: &[u8], range: Range<usize>) -> impl Iterator<Item = Range<usize>> + '_ {
+    let mut pos = range.start;
+    let end = range.end;
     std::iter::from_fn(move || {
-        while pos < bytes.len() {
-            let end = memchr::memchr(b'\n', &bytes[pos..]).map_or(bytes.len(), |k| pos + k + 1);
-            let line = &bytes[pos..end];
-            pos = end;
-            if !strip_newline(line).is_empty() {
-                return Some(line);
+        while pos < end {
+            let stop = memchr::memchr(b'\n', &bytes[pos..end]).map_or(end, |k| pos + k + 1);
+            let row = pos..stop;
+            pos = stop;
+            if !strip_newline(&bytes[row.clone()]).is_empty() {
+                return Some(row);
             }
         }
         None
     })
+}
+
+/// Writes the pending run of kept rows and empties it.
+fn flush_run<W: std::io::Write + ?Sized>(
+    out: &mut W,
+    bytes: &[u8],
+    run: &mut Range<usize>,
+    ends_with_newline: &mut bool,
+) -> std::io::Result<()> {
+    if run.start < run.end {
+        let rows = &bytes[run.clone()];
+        out.write_all(rows)?;
+        *ends_with_newline = rows.ends_with(b"\n");
+        *run = 0..0;
+    }
+    Ok(())
 }
 
 /// `line` without its `\n` or `\r\n`.
@@ -204,18 +221,12 @@ impl CsvRows {
     /// The rows of `piece` in `bytes` (the parsed file), each with its line
     /// break (the file's last row may have none).
     pub fn rows<'a>(&self, bytes: &'a [u8], piece: &RowPiece) -> impl Iterator<Item = &'a [u8]> {
-        rows_in(&bytes[piece.bytes.clone()])
+        row_spans(bytes, piece.bytes.clone()).map(move |r| &bytes[r])
     }
 
     /// Encodes the CSV file of the points `keep` marks (1 = kept; one entry
-    /// per row), in file order, then `added` points, if any.
-    ///
-    /// `bytes` is the parsed file. The header and every kept row without an
-    /// edit are copied byte for byte; a row in `edits` (sorted by row, kept
-    /// rows only) has its x, y, z and intensity cells rewritten (shortest
-    /// decimal that reads back to the same `f32`), its other cells kept.
-    /// Added points get x, y, z, intensity, ring and time cells (time in the
-    /// file's own origin) and empty cells in every other column.
+    /// per row), in file order, then `added` points, if any: what
+    /// [`CsvRows::write_subset`] writes, as bytes.
     pub fn encode_subset(
         &self,
         bytes: &[u8],
@@ -223,39 +234,64 @@ impl CsvRows {
         edits: &[RowEdit],
         added: Option<&PointCloud>,
     ) -> Vec<u8> {
-        let edit_at = |row: usize| edits.partition_point(|e| e.row < row);
-        let parts: Vec<Vec<u8>> = self
-            .pieces
-            .par_iter()
-            .map(|p| {
-                let keep = &keep[p.first_row..p.first_row + p.rows];
-                let kept = keep.iter().map(|&k| usize::from(k != 0)).sum::<usize>();
-                let mut out = Vec::with_capacity(p.bytes.len() * kept / p.rows.max(1) + 64);
-                let mut e = edit_at(p.first_row);
-                for (k, row) in self.rows(bytes, p).enumerate() {
-                    if keep[k] == 0 {
-                        continue;
-                    }
-                    let i = p.first_row + k;
-                    if e < edits.len() && edits[e].row == i {
-                        self.rewrite_row(&mut out, row, &edits[e].values);
-                        e += 1;
-                    } else {
-                        out.extend_from_slice(row);
-                    }
+        let mut out = Vec::with_capacity(bytes.len());
+        self.write_subset(bytes, keep, edits, added, &mut out)
+            .expect("writing to a Vec cannot fail");
+        out
+    }
+
+    /// Writes the CSV file of the points `keep` marks (1 = kept; one entry
+    /// per row), in file order, then `added` points, if any, to `out`.
+    ///
+    /// `bytes` is the parsed file. The header and every kept row without an
+    /// edit are copied byte for byte (consecutive kept rows as one slice of
+    /// `bytes`, so a mostly kept file goes out in a few large writes); a row
+    /// in `edits` (sorted by row, kept rows only) has its x, y, z and
+    /// intensity cells rewritten (shortest decimal that reads back to the
+    /// same `f32`), its other cells kept. Added points get x, y, z,
+    /// intensity, ring and time cells (time in the file's own origin) and
+    /// empty cells in every other column. Blank lines are not written.
+    pub fn write_subset<W: std::io::Write + ?Sized>(
+        &self,
+        bytes: &[u8],
+        keep: &[u8],
+        edits: &[RowEdit],
+        added: Option<&PointCloud>,
+        out: &mut W,
+    ) -> std::io::Result<()> {
+        let header = &bytes[self.header.clone()];
+        out.write_all(header)?;
+        let mut ends_with_newline = header.is_empty() || header.ends_with(b"\n");
+        let mut e = 0usize;
+        let mut scratch = Vec::new();
+        // The pending run of consecutive kept rows, as a byte range.
+        let mut run = 0..0;
+        for p in &self.pieces {
+            let keep = &keep[p.first_row..p.first_row + p.rows];
+            for (k, row) in row_spans(bytes, p.bytes.clone()).enumerate() {
+                if keep[k] == 0 {
+                    continue;
                 }
-                out
-            })
-            .collect();
-        let body: usize = parts.iter().map(Vec::len).sum();
-        let mut out = Vec::with_capacity(self.header.len() + body + 64);
-        out.extend_from_slice(&bytes[self.header.clone()]);
-        for part in &parts {
-            out.extend_from_slice(part);
+                let i = p.first_row + k;
+                if e < edits.len() && edits[e].row == i {
+                    flush_run(out, bytes, &mut run, &mut ends_with_newline)?;
+                    scratch.clear();
+                    self.rewrite_row(&mut scratch, &bytes[row.clone()], &edits[e].values);
+                    out.write_all(&scratch)?;
+                    ends_with_newline = scratch.ends_with(b"\n");
+                    e += 1;
+                } else if run.end == row.start && run.start < run.end {
+                    run.end = row.end;
+                } else {
+                    flush_run(out, bytes, &mut run, &mut ends_with_newline)?;
+                    run = row;
+                }
+            }
         }
+        flush_run(out, bytes, &mut run, &mut ends_with_newline)?;
         if let Some(added) = added.filter(|a| !a.is_empty()) {
-            if !out.ends_with(b"\n") {
-                out.extend_from_slice(self.newline);
+            if !ends_with_newline {
+                out.write_all(self.newline)?;
             }
             let mut cells = vec![String::new(); self.columns];
             for i in 0..added.len() {
@@ -279,11 +315,11 @@ impl CsvRows {
                         write!(cells[j], "{}", f64::from(t[i]) + self.time_origin)
                     };
                 }
-                out.extend_from_slice(cells.join(",").as_bytes());
-                out.extend_from_slice(self.newline);
+                out.write_all(cells.join(",").as_bytes())?;
+                out.write_all(self.newline)?;
             }
         }
-        out
+        Ok(())
     }
 
     /// Appends `row` with its x, y, z and intensity cells replaced.
@@ -1236,6 +1272,52 @@ mod tests {
         let out = rows.encode_subset(text, &[1, 0, 1], &[edit], Some(&added));
         let want = "ring,x,y,z,intensity,time,note\r\n3,10,0,0,7,1700000000.5,a b\r\n5,1.5,-0.25,0.1,3,1700000001,d\r\n7,2,0,0.5,4,1700000000.75,\r\n";
         assert_eq!(String::from_utf8(out).unwrap(), want);
+    }
+
+    /// Every keep pattern of a file with blank lines and no final line
+    /// break: the written subset is exactly the kept rows, in order (runs of
+    /// consecutive kept rows are written as one slice, which must neither
+    /// drop a row nor carry a blank line along), and an added point after a
+    /// kept last row gets its own line.
+    #[test]
+    fn write_subset_gives_exactly_the_kept_rows_for_every_pattern() {
+        let text = b"x,y,z,intensity\n1,0,0,1\n2,0,0,2\n\n3,0,0,3\n4,0,0,4\n\n\n5,0,0,5";
+        let rows = parse_csv_rows(
+            text,
+            Path::new("t.csv"),
+            &ReadOptions::default(),
+            CsvNeeds::default(),
+        )
+        .unwrap()
+        .unwrap();
+        let lines = ["1,0,0,1", "2,0,0,2", "3,0,0,3", "4,0,0,4", "5,0,0,5"];
+        let mut added = PointCloud::default();
+        added.push(6.0, 0.0, 0.0, 6.0, 0);
+        for pattern in 0u32..32 {
+            let keep: Vec<u8> = (0..5).map(|k| ((pattern >> k) & 1) as u8).collect();
+            let kept: Vec<&str> = (0..5).filter(|&k| keep[k] == 1).map(|k| lines[k]).collect();
+            let mut want = String::from("x,y,z,intensity\n");
+            for (i, l) in kept.iter().enumerate() {
+                want.push_str(l);
+                // Only the file's last row has no line break.
+                if i + 1 < kept.len() || keep[4] == 0 {
+                    want.push('\n');
+                }
+            }
+            let out = rows.encode_subset(text, &keep, &[], None);
+            assert_eq!(String::from_utf8(out).unwrap(), want, "keep {keep:?}");
+            let with_added = rows.encode_subset(text, &keep, &[], Some(&added));
+            let mut want_added = want.clone();
+            if !want_added.ends_with('\n') {
+                want_added.push('\n');
+            }
+            want_added.push_str("6,0,0,6\n");
+            assert_eq!(
+                String::from_utf8(with_added).unwrap(),
+                want_added,
+                "keep {keep:?}"
+            );
+        }
     }
 
     #[test]

@@ -11,7 +11,6 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
-use std::io::Write as _;
 use std::path::Path;
 
 /// Why an atomic write failed: the step that failed and the system's error.
@@ -31,6 +30,29 @@ pub struct AtomicWriteError {
 /// synced, renamed). The file gets the mode of a plainly created file (0666
 /// less the umask on Unix), not the 0600 of a temporary file.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), AtomicWriteError> {
+    write_atomic_with(path, |w| w.write_all(bytes))
+}
+
+/// Like [`write_atomic`], but `fill` streams the contents into the
+/// temporary file (through a 1 MiB buffer) instead of taking them as one
+/// slice, so a large output need not be assembled in memory first. An error
+/// from `fill` is reported as a failed "write" and leaves no file behind.
+///
+/// ```
+/// use std::io::Write as _;
+/// let dir = tempfile::tempdir()?;
+/// let path = dir.path().join("rows.csv");
+/// murk_types::write_atomic_with(&path, |w| {
+///     w.write_all(b"x,y\n")?;
+///     w.write_all(b"1,2\n")
+/// })?;
+/// assert_eq!(std::fs::read(&path)?, b"x,y\n1,2\n");
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+pub fn write_atomic_with(
+    path: &Path,
+    fill: impl FnOnce(&mut dyn std::io::Write) -> std::io::Result<()>,
+) -> Result<(), AtomicWriteError> {
     let err = |action: &'static str| move |source| AtomicWriteError { action, source };
     let dir = match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p,
@@ -43,10 +65,12 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), AtomicWriteError> {
         use std::os::unix::fs::PermissionsExt as _;
         builder.permissions(std::fs::Permissions::from_mode(0o666));
     }
-    let mut tmp = builder
+    let tmp = builder
         .tempfile_in(dir)
         .map_err(err("create temporary file"))?;
-    tmp.write_all(bytes).map_err(err("write"))?;
+    let mut w = std::io::BufWriter::with_capacity(1 << 20, tmp);
+    fill(&mut w).map_err(err("write"))?;
+    let tmp = w.into_inner().map_err(|e| err("write")(e.into_error()))?;
     tmp.as_file().sync_data().map_err(err("sync"))?;
     tmp.persist(path)
         .map_err(|e| err("rename temporary file")(e.error))?;

@@ -46,7 +46,7 @@ mod lidar;
 mod table;
 mod weather;
 
-pub use atomic::{AtomicWriteError, write_atomic};
+pub use atomic::{AtomicWriteError, write_atomic, write_atomic_with};
 pub use bins::nice_step;
 pub use cloud::PointCloud;
 pub use error::TypesError;
