@@ -257,3 +257,43 @@ fn camera_refuses_bad_inputs_with_the_reason() {
     }
     assert!(!out.exists(), "nothing written when refused");
 }
+
+/// A real KITTI frame (1242 × 375: reflect-padded to 1244 × 376 for the
+/// network) at full resolution and at the generator's training size: the
+/// output keeps the original size, equals the library's translation, and
+/// is not the input. Skips, saying so, when the shared data is absent.
+#[test]
+fn camera_keeps_the_size_of_a_real_kitti_frame() {
+    let png = Path::new("/work/shared/data/real/kitti-000008.png");
+    if !png.exists() {
+        println!("skipping: {} is absent", png.display());
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let generator = gan_data("tiny_generator.onnx");
+    let input = pixels(png);
+    assert_eq!(input.dimensions(), (1242, 375));
+    let mut g = Generator::load(&generator).unwrap();
+    for work in [None, Some("448x256")] {
+        let out = dir.path().join(work.unwrap_or("full"));
+        let mut args = vec![
+            "camera",
+            "--generator",
+            s(&generator),
+            s(png),
+            "--out",
+            s(&out),
+        ];
+        if let Some(w) = work {
+            args.extend(["--work-size", w]);
+        }
+        let stdout = ok(&murk(&args));
+        assert!(stdout.starts_with("1 image through"), "{stdout}");
+        let got = pixels(&out.join("kitti-000008.png"));
+        assert_eq!(got.dimensions(), (1242, 375), "{work:?}");
+        assert_ne!(got, input, "{work:?}: the generator changed nothing");
+        if work.is_none() {
+            assert_eq!(got, g.translate(&input).unwrap());
+        }
+    }
+}

@@ -448,6 +448,9 @@ const POW10: [f64; 23] = [
     1e17, 1e18, 1e19, 1e20, 1e21, 1e22,
 ];
 
+/// Powers of ten exact in `f32` (5^10 < 2^24).
+const POW10_F32: [f32; 11] = [1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10];
+
 /// Parses a plain decimal cell (`[+-]digits[.digits]`, at most 15
 /// significant digits and 22 decimals) to exactly what `str::parse::<f32>`
 /// gives, or `None` for anything else (which the caller hands to the
@@ -503,7 +506,17 @@ fn fast_f32_prefix(bytes: &[u8]) -> Option<(f32, usize)> {
         }
         p += 1;
     }
-    if nd == 0 || m >= 1 << 53 || decimals >= POW10.len() {
+    if nd == 0 {
+        return None;
+    }
+    if m < 1 << 24 && decimals < POW10_F32.len() {
+        // Both operands are exact in f32, so the one correctly rounded f32
+        // division is the correctly rounded decimal (Clinger's fast path):
+        // the common cell, without the f64 division and its tie check.
+        let f = m as f32 / POW10_F32[decimals];
+        return Some((if neg { -f } else { f }, p));
+    }
+    if m >= 1 << 53 || decimals >= POW10.len() {
         return None;
     }
     let r = m as f64 / POW10[decimals];
