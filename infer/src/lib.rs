@@ -27,9 +27,11 @@
 //!   [`BatchReport`].
 //! - [`camera`]: physics-based rain on camera images (seed 003 §3.1),
 //!   [`camera::RainParams`] → [`camera::RainRenderer`]; CycleGAN weather
-//!   generators through ONNX, [`camera::GeneratorParams`] →
-//!   [`camera::Generator`] (backend: cargo feature `tract`, the default,
-//!   or `native`).
+//!   generators through ONNX, `camera::GeneratorParams` →
+//!   `camera::Generator` (backend: cargo feature `tract`, the default, or
+//!   `native`; with neither, murk-infer builds without ONNX and without
+//!   the `camera::gan` module, which is what LiDAR-only users such as
+//!   murk-diagnose get).
 //!
 //! **Reflectivity bands are calibrated VLP-16 reflectivity**, whatever the
 //! input's [`murk_types::IntensityScale`]: a KITTI return stored as 0.03

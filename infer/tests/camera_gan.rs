@@ -7,6 +7,8 @@
 //! by far more than that when one weight is perturbed). No Python is needed
 //! here: the model and the references are committed in `tests/data/gan/`.
 
+#![cfg(any(feature = "tract", feature = "native"))]
+
 use std::path::{Path, PathBuf};
 
 use image::{Rgb, RgbImage};

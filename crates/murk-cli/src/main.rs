@@ -13,6 +13,12 @@
 
 use clap::{Parser, Subcommand};
 
+#[cfg(not(any(feature = "tract", feature = "native")))]
+compile_error!(
+    "murk: enable one ONNX backend for `murk camera`: feature `tract` (default) or `native` \
+     (`--no-default-features --features native`)"
+);
+
 mod cmd;
 
 /// Data-driven weather noise models for automotive LiDAR.

@@ -90,8 +90,6 @@ compile_error!(
     "murk-infer: the features `tract` and `native` exclude each other (ort's API table is either tract's or the \
      native library's); build with `--no-default-features --features native` for the native ONNX Runtime"
 );
-#[cfg(not(any(feature = "tract", feature = "native")))]
-compile_error!("murk-infer: enable one ONNX backend: feature `tract` (default) or `native`");
 
 /// The smallest image side the generator accepts: after two stride-2
 /// convolutions the residual blocks' 1-pixel reflect padding needs 2 pixels.

@@ -1,8 +1,8 @@
 //! Camera weather: physics-based rain on images (seed 003 §3.1 and
 //! appendices A–B: a rainfall rate in mm/h, an image and its depth in, the
 //! rainy image out) and CycleGAN weather generators run through ONNX
-//! ([`gan`]: D3.3 §2 fog/rain/snow translations; seed 003 §3.3's GAN+PBR
-//! hybrid is a [`Generator::translate`] followed by
+//! (`gan`: D3.3 §2 fog/rain/snow translations; seed 003 §3.3's GAN+PBR
+//! hybrid is a `Generator::translate` followed by
 //! [`RainRenderer::render`]).
 //!
 //! Pieces, linfa style (checked parameters → a value that renders):
@@ -17,10 +17,11 @@
 //!   nearest-neighbour fill ([`Densify`]);
 //! - [`read_rgb`] / [`write_rgb_atomic`]: image files in and out (atomic
 //!   writes);
-//! - [`GeneratorParams`] → [`Generator`]: an ONNX CycleGAN generator
-//!   (pure-Rust tract backend by default, native ONNX Runtime with the
-//!   `native` feature), full resolution with reflect padding to multiples
-//!   of 4;
+//! - `GeneratorParams` → `Generator` (module `gan`): an ONNX CycleGAN
+//!   generator (pure-Rust tract backend by default, native ONNX Runtime
+//!   with the `native` feature; built without either feature, murk-infer
+//!   has no `gan` module and needs no ONNX crate), full resolution with
+//!   reflect padding to multiples of 4;
 //! - [`physics`]: the laws used (extinction, Marshall–Palmer, terminal
 //!   velocity, drop oscillation), public so they can be checked.
 //!
@@ -56,6 +57,7 @@
 
 pub mod calib;
 pub mod depth;
+#[cfg(any(feature = "tract", feature = "native"))]
 pub mod gan;
 pub mod io;
 pub mod photometry;
@@ -64,6 +66,7 @@ pub mod rain;
 
 pub use calib::{Intrinsics, KittiCalib};
 pub use depth::{Densify, DepthMap};
+#[cfg(any(feature = "tract", feature = "native"))]
 pub use gan::{
     Generator, GeneratorParams, Planar, TranslateTimes, padded_size, postprocess, preprocess,
 };
