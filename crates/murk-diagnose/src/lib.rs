@@ -10,7 +10,7 @@
 //!    (deterministic from the seed). For each fold the baseline is fitted
 //!    (murk-fit) on the other folds and the clear recordings, or taken from a
 //!    given table.
-//! 2. **Simulate and compare** every held-out recording ([`evaluate`]):
+//! 2. **Simulate and compare** every held-out recording ([`mod@evaluate`]):
 //!    survival (keep probability per reference cell), range and intensity of
 //!    kept returns, ghost/ring counts and the scene metrics ([`scene`]) of
 //!    murk-infer simulations from the nearest clear recording.
