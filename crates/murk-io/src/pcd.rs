@@ -310,6 +310,21 @@ struct Wanted {
     time: Option<usize>,
 }
 
+impl Wanted {
+    /// The binary layout of the wanted fields, `field(i)` locating the
+    /// header's field `i`.
+    fn layout<'a>(&self, field: impl Fn(usize) -> Field<'a>) -> Layout<'a> {
+        Layout {
+            x: field(self.x),
+            y: field(self.y),
+            z: field(self.z),
+            intensity: field(self.intensity),
+            ring: self.ring.map(&field),
+            time: self.time.map(&field),
+        }
+    }
+}
+
 fn wanted(path: &Path, h: &Header) -> Result<Wanted, IoError> {
     let req = |name: &'static str| -> Result<usize, IoError> {
         find_field(path, h, name)?.ok_or_else(|| IoError::MissingField {
@@ -382,15 +397,7 @@ pub fn parse_pcd(bytes: &[u8], source: &Path, opts: &ReadOptions) -> Result<Poin
                 offset: offsets[i],
                 ty: h.fields[i].ty.expect("checked by find_field"),
             };
-            let layout = Layout {
-                x: field(want.x),
-                y: field(want.y),
-                z: field(want.z),
-                intensity: field(want.intensity),
-                ring: want.ring.map(field),
-                time: want.time.map(field),
-            };
-            columns::decode(source, &layout, n, lookup.as_ref(), scale)
+            columns::decode(source, &want.layout(field), n, lookup.as_ref(), scale)
         }
         PcdData::BinaryCompressed => {
             if data.len() < 8 {
@@ -475,15 +482,7 @@ pub fn parse_pcd(bytes: &[u8], source: &Path, opts: &ReadOptions) -> Result<Poin
                     ty: f.ty.expect("checked by find_field"),
                 }
             };
-            let layout = Layout {
-                x: field(want.x),
-                y: field(want.y),
-                z: field(want.z),
-                intensity: field(want.intensity),
-                ring: want.ring.map(field),
-                time: want.time.map(field),
-            };
-            columns::decode(source, &layout, n, lookup.as_ref(), scale)
+            columns::decode(source, &want.layout(field), n, lookup.as_ref(), scale)
         }
     }
 }

@@ -259,15 +259,10 @@ mod tests {
         }
     }
 
-    #[test]
-    fn lookup_matches_nearest_ring_on_vlp16() {
-        agrees_with_nearest_ring(&LidarSpec::vlp16());
-    }
-
-    #[test]
-    fn lookup_matches_nearest_ring_on_a_128_ring_sensor_with_binary_search() {
+    /// A 128-ring sensor with unsorted ids, uneven spacing and one duplicate
+    /// elevation (past the linear-scan limit, so lookups binary-search).
+    fn irregular_128_rings() -> LidarSpec {
         let mut spec = LidarSpec::vlp16();
-        // Unsorted ids, uneven spacing, one duplicate elevation.
         spec.elevation_deg = (0..128)
             .map(|i| {
                 let k = (i * 37) % 128;
@@ -275,6 +270,17 @@ mod tests {
             })
             .collect();
         spec.elevation_deg[5] = spec.elevation_deg[6];
+        spec
+    }
+
+    #[test]
+    fn lookup_matches_nearest_ring_on_vlp16() {
+        agrees_with_nearest_ring(&LidarSpec::vlp16());
+    }
+
+    #[test]
+    fn lookup_matches_nearest_ring_on_a_128_ring_sensor_with_binary_search() {
+        let spec = irregular_128_rings();
         assert!(spec.elevation_deg.len() - 1 > LINEAR_MAX);
         agrees_with_nearest_ring(&spec);
     }
@@ -385,14 +391,7 @@ mod tests {
 
     #[test]
     fn fill_equals_ring_on_a_128_ring_sensor_and_a_one_ring_sensor() {
-        let mut spec = LidarSpec::vlp16();
-        spec.elevation_deg = (0..128)
-            .map(|i| {
-                let k = (i * 37) % 128;
-                -25.0 + 40.0 * (k as f64 / 127.0).powf(1.3)
-            })
-            .collect();
-        spec.elevation_deg[5] = spec.elevation_deg[6];
+        let mut spec = irregular_128_rings();
         fill_equals_ring(&spec);
         // Wide-angle sensor: thresholds up to ±80°.
         spec.elevation_deg = (0..32).map(|i| -85.0 + 170.0 * i as f64 / 31.0).collect();
