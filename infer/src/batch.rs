@@ -126,11 +126,24 @@ impl BatchReport {
 
 /// Writes `bytes` to `path` atomically ([`murk_types::write_atomic`]).
 pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), InferError> {
-    murk_types::write_atomic(path, bytes).map_err(|e| InferError::Fs {
+    murk_types::write_atomic(path, bytes).map_err(fs_error(path))
+}
+
+/// Streams `fill` to `path` atomically ([`murk_types::write_atomic_with`]).
+fn write_atomic_with(
+    path: &Path,
+    fill: impl FnOnce(&mut dyn std::io::Write) -> std::io::Result<()>,
+) -> Result<(), InferError> {
+    murk_types::write_atomic_with(path, fill).map_err(fs_error(path))
+}
+
+/// The error of a failed atomic write of `path`.
+fn fs_error(path: &Path) -> impl Fn(murk_types::AtomicWriteError) -> InferError + '_ {
+    move |e| InferError::Fs {
         path: path.to_path_buf(),
         action: e.action,
         source: e.source,
-    })
+    }
 }
 
 /// `name` without the extension of `format` (`a.pcd.bin` → `a`).
@@ -406,20 +419,12 @@ fn run_csv_rows(
             Some(out) => changed_rows(&rows.cloud, &mask, out),
             None => (Vec::new(), None),
         };
-        murk_types::write_atomic_with(&job.output, |w| {
+        write_atomic_with(&job.output, |w| {
             rows.write_subset(bytes, &mask, &edits, added.as_ref(), w)
-        })
-        .map_err(|e| InferError::Fs {
-            path: job.output.clone(),
-            action: e.action,
-            source: e.source,
         })?;
         Ok::<_, InferError>(Some(summary))
     })??;
-    let Some(summary) = summary else {
-        return Ok(None);
-    };
-    Ok(Some(FileReport {
+    Ok(summary.map(|summary| FileReport {
         input: job.input.clone(),
         output: job.output.clone(),
         summary,

@@ -30,7 +30,8 @@ pub struct AtomicWriteError {
 /// synced, renamed). The file gets the mode of a plainly created file (0666
 /// less the umask on Unix), not the 0600 of a temporary file.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), AtomicWriteError> {
-    write_atomic_with(path, |w| w.write_all(bytes))
+    // One slice: written straight to the file, no buffer in between.
+    persist_atomic(path, |file| std::io::Write::write_all(file, bytes))
 }
 
 /// Like [`write_atomic`], but `fill` streams the contents into the
@@ -53,6 +54,21 @@ pub fn write_atomic_with(
     path: &Path,
     fill: impl FnOnce(&mut dyn std::io::Write) -> std::io::Result<()>,
 ) -> Result<(), AtomicWriteError> {
+    persist_atomic(path, |file| {
+        let mut w = std::io::BufWriter::with_capacity(1 << 20, file);
+        fill(&mut w)?;
+        w.into_inner()
+            .map(drop)
+            .map_err(std::io::IntoInnerError::into_error)
+    })
+}
+
+/// The temporary file, `fill`, sync and rename shared by [`write_atomic`]
+/// and [`write_atomic_with`].
+fn persist_atomic(
+    path: &Path,
+    fill: impl FnOnce(&mut std::fs::File) -> std::io::Result<()>,
+) -> Result<(), AtomicWriteError> {
     let err = |action: &'static str| move |source| AtomicWriteError { action, source };
     let dir = match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p,
@@ -65,12 +81,10 @@ pub fn write_atomic_with(
         use std::os::unix::fs::PermissionsExt as _;
         builder.permissions(std::fs::Permissions::from_mode(0o666));
     }
-    let tmp = builder
+    let mut tmp = builder
         .tempfile_in(dir)
         .map_err(err("create temporary file"))?;
-    let mut w = std::io::BufWriter::with_capacity(1 << 20, tmp);
-    fill(&mut w).map_err(err("write"))?;
-    let tmp = w.into_inner().map_err(|e| err("write")(e.into_error()))?;
+    fill(tmp.as_file_mut()).map_err(err("write"))?;
     tmp.as_file().sync_data().map_err(err("sync"))?;
     tmp.persist(path)
         .map_err(|e| err("rename temporary file")(e.error))?;
