@@ -64,6 +64,7 @@
 
 mod bin_records;
 mod columns;
+mod decimal;
 mod error;
 mod options;
 mod pcap;
