@@ -21,6 +21,15 @@ compile_error!(
 
 mod cmd;
 
+/// mimalloc instead of the system allocator: batch jobs allocate and free
+/// file-sized buffers (columns, masks, outputs) once per file, and glibc
+/// hands buffers that large back to the kernel on every free, so the next
+/// file pays a page fault per 4 KiB again. Measured on `murk apply` of 8
+/// CSV files (2 M rows): the parse alone went from 58 to 43 ns per row on
+/// one thread, and from 34 to 22 on two.
+#[global_allocator]
+static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 /// Data-driven weather noise models for automotive LiDAR.
 #[derive(Parser, Debug)]
 #[command(name = "murk", version, about, long_about = None)]
