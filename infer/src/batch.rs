@@ -23,7 +23,7 @@ use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 
 use murk_io::{CsvNeeds, PcdData, ReadOptions, RowEdit, WriteOptions};
-use murk_types::{PointCloud, PointFormat};
+use murk_types::{PointCloud, PointFormat, StagedFile};
 use rayon::prelude::*;
 use serde::Serialize;
 
@@ -127,14 +127,6 @@ impl BatchReport {
 /// Writes `bytes` to `path` atomically ([`murk_types::write_atomic`]).
 pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), InferError> {
     murk_types::write_atomic(path, bytes).map_err(fs_error(path))
-}
-
-/// Streams `fill` to `path` atomically ([`murk_types::write_atomic_with`]).
-fn write_atomic_with(
-    path: &Path,
-    fill: impl FnOnce(&mut dyn std::io::Write) -> std::io::Result<()>,
-) -> Result<(), InferError> {
-    murk_types::write_atomic_with(path, fill).map_err(fs_error(path))
 }
 
 /// The error of a failed atomic write of `path`.
@@ -369,14 +361,26 @@ pub fn run_job(
     job: &Job,
     opts: &BatchOptions,
 ) -> Result<FileReport, InferError> {
+    let (report, staged) = stage_job(applier, job, opts)?;
+    commit(staged)?;
+    Ok(report)
+}
+
+/// [`run_job`] up to the output's temporary file: the report and the staged
+/// output, which [`commit`] syncs and renames into place.
+fn stage_job(
+    applier: &Applier,
+    job: &Job,
+    opts: &BatchOptions,
+) -> Result<(FileReport, StagedFile), InferError> {
     let mut read = opts.read.clone();
     read.format = Some(job.format_in);
     if job.format_in == PointFormat::Csv
         && job.format_out == PointFormat::Csv
         && (applier.identity || applier.extensions.is_empty())
-        && let Some(report) = run_csv_rows(applier, job, &read)?
+        && let Some(staged) = stage_csv_rows(applier, job, &read)?
     {
-        return Ok(report);
+        return Ok(staged);
     }
     let cloud = murk_io::read_cloud(&job.input, &read)?;
     let (mut out, summary) = applier.apply(&cloud, &job.key)?;
@@ -388,28 +392,37 @@ pub fn run_job(
         format: job.format_out,
         pcd_data: opts.pcd_data,
     };
-    murk_io::write_cloud_with(&job.output, &out, &w)?;
-    Ok(FileReport {
-        input: job.input.clone(),
-        output: job.output.clone(),
-        summary,
-    })
+    let staged = murk_io::stage_cloud_with(&job.output, &out, &w)?;
+    Ok((
+        FileReport {
+            input: job.input.clone(),
+            output: job.output.clone(),
+            summary,
+        },
+        staged,
+    ))
 }
 
-/// The row-preserving CSV path of [`run_job`]; `None` when the file has
+/// Syncs a staged output and renames it into place.
+fn commit(staged: StagedFile) -> Result<(), InferError> {
+    let path = staged.path().to_path_buf();
+    staged.commit().map_err(fs_error(&path))
+}
+
+/// The row-preserving CSV path of [`stage_job`]; `None` when the file has
 /// quoted data cells.
-fn run_csv_rows(
+fn stage_csv_rows(
     applier: &Applier,
     job: &Job,
     read: &ReadOptions,
-) -> Result<Option<FileReport>, InferError> {
+) -> Result<Option<(FileReport, StagedFile)>, InferError> {
     let needs = CsvNeeds {
         ring: applier.near_range,
         time: applier.near_range,
     };
     // The file's bytes stay in murk-io's per-thread read buffer; kept rows
     // are streamed from them to the output file.
-    let summary = murk_io::with_file_bytes(&job.input, |bytes| {
+    let staged = murk_io::with_file_bytes(&job.input, |bytes| {
         let Some(rows) = murk_io::parse_csv_rows(bytes, &job.input, read, needs)? else {
             return Ok(None);
         };
@@ -419,15 +432,21 @@ fn run_csv_rows(
             Some(out) => changed_rows(&rows.cloud, &mask, out),
             None => (Vec::new(), None),
         };
-        write_atomic_with(&job.output, |w| {
+        let staged = murk_types::stage_atomic_with(&job.output, |w| {
             rows.write_subset(bytes, &mask, &edits, added.as_ref(), w)
-        })?;
-        Ok::<_, InferError>(Some(summary))
+        })
+        .map_err(fs_error(&job.output))?;
+        Ok::<_, InferError>(Some((summary, staged)))
     })??;
-    Ok(summary.map(|summary| FileReport {
-        input: job.input.clone(),
-        output: job.output.clone(),
-        summary,
+    Ok(staged.map(|(summary, staged)| {
+        (
+            FileReport {
+                input: job.input.clone(),
+                output: job.output.clone(),
+                summary,
+            },
+            staged,
+        )
     }))
 }
 
@@ -470,26 +489,87 @@ fn changed_rows(
     (edits, added)
 }
 
+/// Threads that sync and rename finished outputs while the rayon workers
+/// go on computing (see [`run`]).
+const COMMITTERS: usize = 4;
+
+/// Outputs staged but not yet committed, at most: bounds the open files
+/// (and temporary files) a batch of thousands of scans holds at once.
+const STAGED_MAX: usize = 64;
+
 /// Runs every job of `plan` in parallel; `progress` is called once per
-/// finished file (from worker threads). On failure the error of the first
-/// failing file in plan order is returned (files that succeeded are
-/// written).
+/// finished file (from committing threads), after its output is in place.
+/// On failure the error of the first failing file in plan order is
+/// returned (files that succeeded are written).
+///
+/// Workers (rayon) read, apply and write each output to a temporary file;
+/// [`COMMITTERS`] plain threads sync those files and rename them into
+/// place. A sync waits on the disk rather than working, so this keeps the
+/// cores busy, and concurrent syncs let the file system commit many files
+/// at once. Each output is still synced before it appears under its name.
 pub fn run(
     applier: &Applier,
     plan: &Plan,
     opts: &BatchOptions,
     progress: &(dyn Fn(&FileReport) + Sync),
 ) -> Result<BatchReport, InferError> {
-    let results: Vec<Result<FileReport, InferError>> = plan
-        .jobs
-        .par_iter()
-        .map(|j| {
-            let r = run_job(applier, j, opts);
-            if let Ok(f) = &r {
-                progress(f);
-            }
-            r
-        })
+    let n = plan.jobs.len();
+    let (tx, rx) = std::sync::mpsc::sync_channel::<(usize, FileReport, StagedFile)>(STAGED_MAX);
+    // Shared by the committers only: when the last of them ends (even by a
+    // panic), the receiver goes and a worker's send fails instead of
+    // waiting forever.
+    let rx = std::sync::Arc::new(std::sync::Mutex::new(rx));
+    let (staged, committed) = std::thread::scope(|scope| {
+        let committers: Vec<_> = (0..COMMITTERS.min(n.max(1)))
+            .map(|_| {
+                let rx = std::sync::Arc::clone(&rx);
+                scope.spawn(move || {
+                    let mut done = Vec::new();
+                    loop {
+                        // The lock is held only to take the next file.
+                        let next = rx.lock().unwrap_or_else(|p| p.into_inner()).recv();
+                        let Ok((i, report, staged)) = next else {
+                            break;
+                        };
+                        let r = commit(staged).map(|()| {
+                            progress(&report);
+                            report
+                        });
+                        done.push((i, r));
+                    }
+                    done
+                })
+            })
+            .collect();
+        drop(rx);
+        let staged: Vec<Option<InferError>> = plan
+            .jobs
+            .par_iter()
+            .enumerate()
+            .map_with(tx, |tx, (i, j)| match stage_job(applier, j, opts) {
+                // A send fails only when every committer is gone (a panic,
+                // re-raised below); the temporary file is then dropped.
+                Ok((report, staged)) => tx
+                    .send((i, report, staged))
+                    .err()
+                    .map(|_| InferError::Conflict("the committing threads stopped".into())),
+                Err(e) => Some(e),
+            })
+            .collect();
+        let committed: Vec<(usize, Result<FileReport, InferError>)> = committers
+            .into_iter()
+            .flat_map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
+            .collect();
+        (staged, committed)
+    });
+    let mut results: Vec<Option<Result<FileReport, InferError>>> =
+        staged.into_iter().map(|e| e.map(Err)).collect();
+    for (i, r) in committed {
+        results[i] = Some(r);
+    }
+    let results: Vec<Result<FileReport, InferError>> = results
+        .into_iter()
+        .map(|r| r.expect("every job is staged or failed"))
         .collect();
     let mut files = Vec::with_capacity(results.len());
     for r in results {

@@ -373,3 +373,56 @@ fn csv_bad_row_error_names_file_line_and_column() {
     );
     assert!(!out.join("bad.csv").exists());
 }
+
+#[test]
+fn many_files_commit_once_each_before_progress_and_leave_no_temporary_files() {
+    // More files than the staged-output bound, so workers wait on the
+    // committing threads; one unreadable file among them.
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("in");
+    let out = dir.path().join("out");
+    std::fs::create_dir_all(&input).unwrap();
+    for i in 0..150u64 {
+        let c = scan(200, 10 + i);
+        let format = if i % 2 == 0 {
+            PointFormat::Csv
+        } else {
+            PointFormat::KittiBin
+        };
+        let name = format!("{i:03}.{}", if i % 2 == 0 { "csv" } else { "bin" });
+        write_cloud(&input.join(name), &c, format).unwrap();
+    }
+    std::fs::write(input.join("077.bin"), b"not a multiple of 16").unwrap();
+    let p = plan(std::slice::from_ref(&input), &out, &BatchOptions::default()).unwrap();
+    assert_eq!(p.jobs.len(), 150);
+    let seen = std::sync::Mutex::new(Vec::new());
+    let e = run(&fog(40.0), &p, &BatchOptions::default(), &|f| {
+        assert!(f.output.is_file(), "{} reported before it exists", f.output.display());
+        seen.lock().unwrap().push(f.output.clone());
+    })
+    .unwrap_err();
+    assert!(e.to_string().contains("077.bin"), "{e}");
+    let mut seen = seen.into_inner().unwrap();
+    seen.sort();
+    let before = seen.len();
+    seen.dedup();
+    assert_eq!(seen.len(), before, "a file reported twice");
+    assert_eq!(seen.len(), 149, "every good file written and reported once");
+    let left: Vec<String> = std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with(".tmp"))
+        .collect();
+    assert!(left.is_empty(), "temporary files left: {left:?}");
+    // The written files are the ones a single-file run gives.
+    let j = &p.jobs[4];
+    let single = dir.path().join("single");
+    std::fs::create_dir_all(&single).unwrap();
+    let mut one = j.clone();
+    one.output = single.join("004.csv");
+    murk_infer::batch::run_job(&fog(40.0), &one, &BatchOptions::default()).unwrap();
+    assert_eq!(
+        std::fs::read(&one.output).unwrap(),
+        std::fs::read(out.join("004.csv")).unwrap()
+    );
+}

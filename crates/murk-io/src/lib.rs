@@ -272,6 +272,24 @@ pub fn write_cloud_with(
     write_atomic(path, &bytes)
 }
 
+/// The first half of [`write_cloud_with`]: the encoded cloud in a temporary
+/// file next to `path`, synced and renamed into place by
+/// [`murk_types::StagedFile::commit`] (dropping it removes the temporary
+/// file). For batches that commit on other threads while they go on
+/// computing.
+pub fn stage_cloud_with(
+    path: &Path,
+    cloud: &PointCloud,
+    opts: &WriteOptions,
+) -> Result<murk_types::StagedFile, IoError> {
+    let bytes = encode_cloud(cloud, opts, path)?;
+    murk_types::stage_atomic(path, &bytes).map_err(|e| IoError::Io {
+        path: path.to_path_buf(),
+        action: e.action,
+        source: e.source,
+    })
+}
+
 /// Writes `bytes` to `path` atomically ([`murk_types::write_atomic`]).
 fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
     murk_types::write_atomic(path, bytes).map_err(|e| IoError::Io {

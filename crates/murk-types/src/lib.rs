@@ -46,7 +46,9 @@ mod lidar;
 mod table;
 mod weather;
 
-pub use atomic::{AtomicWriteError, write_atomic, write_atomic_with};
+pub use atomic::{
+    AtomicWriteError, StagedFile, stage_atomic, stage_atomic_with, write_atomic, write_atomic_with,
+};
 pub use bins::nice_step;
 pub use cloud::PointCloud;
 pub use error::TypesError;
