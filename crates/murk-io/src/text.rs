@@ -446,31 +446,52 @@ fn parse_header(bytes: &[u8], source: &Path) -> Result<Header, IoError> {
     })
 }
 
+/// A row read by [`fast_row_at`]: x, y, z and intensity, where the ring
+/// and time cells lie, and where the next row starts.
+type FastRow = ([f32; 4], Range<usize>, Range<usize>, usize);
+
+/// Where the cell starting at `p` ends (its `,`, line break or the end).
+#[inline(always)]
+fn cell_end(buf: &[u8], mut p: usize) -> usize {
+    while p < buf.len() && !matches!(buf[p], b',' | b'\n' | b'\r') {
+        p += 1;
+    }
+    p
+}
+
+/// Where the next row starts when the row's last cell ends at `p`: after a
+/// `\n` or `\r\n`, or at the end of `buf`; `None` for anything else.
+#[inline(always)]
+fn next_row(buf: &[u8], p: usize) -> Option<usize> {
+    if p == buf.len() {
+        Some(p)
+    } else if buf[p] == b'\n' {
+        Some(p + 1)
+    } else if buf[p] == b'\r' && buf.get(p + 1) == Some(&b'\n') {
+        Some(p + 2)
+    } else {
+        None
+    }
+}
+
 /// The common row in one pass, read from `buf[pos..]` (the row, its line
 /// break and any rows after it): every cell of a read coordinate a plain
 /// decimal, no spaces, the row ending in `\n`, `\r\n` or the end of `buf`.
-/// Returns x, y, z, intensity, where the ring and time cells lie in `buf`
-/// and where the next row starts, or `None` for anything else (the caller's
-/// cell-by-cell path then parses the row or names what is wrong with it).
+/// Returns `None` for anything else (the caller's cell-by-cell path then
+/// parses the row or names what is wrong with it).
 ///
 /// Reading from the whole piece rather than from a line cut out first lets
 /// the number reader take eight bytes at a time up to the row's end, and
 /// the row's end is found by walking its cells instead of by a separate
 /// newline search.
 #[inline]
-#[allow(clippy::type_complexity)]
-fn fast_row_at(
-    buf: &[u8],
-    pos: usize,
-    roles: &[Role],
-) -> Option<([f32; 4], Range<usize>, Range<usize>, usize)> {
+fn fast_row_at(buf: &[u8], pos: usize, roles: &[Role]) -> Option<FastRow> {
     let mut v = [0f32; 4];
     let (mut ring, mut time) = (0..0, 0..0);
-    let n = buf.len();
     let mut p = pos;
     for (j, role) in roles.iter().enumerate() {
         if j > 0 {
-            if p >= n || buf[p] != b',' {
+            if p >= buf.len() || buf[p] != b',' {
                 return None;
             }
             p += 1;
@@ -483,9 +504,7 @@ fn fast_row_at(
             }
             other => {
                 let start = p;
-                while p < n && !matches!(buf[p], b',' | b'\n' | b'\r') {
-                    p += 1;
-                }
+                p = cell_end(buf, p);
                 match other {
                     Role::Ring => ring = start..p,
                     Role::Time => time = start..p,
@@ -494,18 +513,62 @@ fn fast_row_at(
             }
         }
     }
-    let next = if p == n {
-        n
-    } else if buf[p] == b'\n' {
-        p + 1
-    } else if buf[p] == b'\r' && buf.get(p + 1) == Some(&b'\n') {
-        p + 2
-    } else {
-        return None;
-    };
-    v.iter()
-        .all(|x| x.is_finite())
-        .then_some((v, ring, time, next))
+    let next = next_row(buf, p)?;
+    Some((v, ring, time, next))
+}
+
+/// [`fast_row_at`] of two rows at once, cell by cell: `Some` only when both
+/// are common rows.
+///
+/// Why: where one cell ends decides where the next is read, so reading a
+/// row is one chain of dependent loads and digit counts, and a single row
+/// loop waits on their latency (a loop that only finds where cells end runs
+/// at 32 ns per row alone, 17 with two rows interleaved). Taking the same
+/// cell of two rows in turn gives the core two independent chains to run
+/// side by side; a row at a time would not, as one row's work fills the
+/// core's window before the other's starts.
+#[inline]
+fn fast_row_pair(
+    ba: &[u8],
+    pa: usize,
+    bb: &[u8],
+    pb: usize,
+    roles: &[Role],
+) -> Option<(FastRow, FastRow)> {
+    let (mut va, mut vb) = ([0f32; 4], [0f32; 4]);
+    let (mut ra, mut ta, mut rb, mut tb) = (0..0, 0..0, 0..0, 0..0);
+    let (mut p, mut q) = (pa, pb);
+    for (j, role) in roles.iter().enumerate() {
+        if j > 0 {
+            if p >= ba.len() || ba[p] != b',' || q >= bb.len() || bb[q] != b',' {
+                return None;
+            }
+            p += 1;
+            q += 1;
+        }
+        match *role {
+            Role::Coord(f) => {
+                let (x, lx) = fast_f32_prefix(&ba[p..])?;
+                let (y, ly) = fast_f32_prefix(&bb[q..])?;
+                va[f] = x;
+                vb[f] = y;
+                p += lx;
+                q += ly;
+            }
+            other => {
+                let (sp, sq) = (p, q);
+                p = cell_end(ba, p);
+                q = cell_end(bb, q);
+                match other {
+                    Role::Ring => (ra, rb) = (sp..p, sq..q),
+                    Role::Time => (ta, tb) = (sp..p, sq..q),
+                    _ => {}
+                }
+            }
+        }
+    }
+    let (na, nb) = (next_row(ba, p)?, next_row(bb, q)?);
+    Some(((va, ra, ta, na), (vb, rb, tb, nb)))
 }
 
 /// What a column is read as.
@@ -638,29 +701,43 @@ impl<'a> PieceParser<'a> {
         }
     }
 
-    /// Skips blank lines, then parses the next row if [`fast_row_at`] takes
-    /// it. False at the piece's end and for any row the fast path declines
-    /// (nothing consumed then: [`PieceParser::finish`] parses it).
+    /// Skips blank lines; false at the piece's end.
     #[inline(always)]
-    fn step(&mut self) -> bool {
+    fn skip_blank(&mut self) -> bool {
         let bytes = &self.data[..self.range.end];
-        let end = self.range.end;
         loop {
-            if self.pos >= end {
+            if self.pos >= self.range.end {
                 return false;
             }
             match bytes[self.pos] {
                 b'\n' => self.pos += 1,
                 b'\r' if bytes.get(self.pos + 1) == Some(&b'\n') => self.pos += 2,
-                _ => break,
+                _ => return true,
             }
         }
-        let Some((v, ring, time, next)) = fast_row_at(bytes, self.pos, self.roles) else {
+    }
+
+    /// Skips blank lines, then parses the next row if [`fast_row_at`] takes
+    /// it. False at the piece's end and for any row the fast path declines
+    /// (nothing consumed then: [`PieceParser::finish`] parses it).
+    #[inline(always)]
+    fn step(&mut self) -> bool {
+        if !self.skip_blank() {
             return false;
-        };
-        let (ring, time) = (&bytes[ring], &bytes[time]);
+        }
+        match fast_row_at(&self.data[..self.range.end], self.pos, self.roles) {
+            Some(row) => self.accept(row),
+            None => false,
+        }
+    }
+
+    /// Stores a row [`fast_row_at`] read, once its ring and time cells (when
+    /// wanted) are valid; false, with nothing consumed, when they are not.
+    #[inline(always)]
+    fn accept(&mut self, (v, ring, time, next): FastRow) -> bool {
+        let bytes = self.data;
         let ring = if self.want_ring {
-            match cell_ring(ring) {
+            match cell_ring(&bytes[ring]) {
                 Ok(Ok(r)) => Some(r),
                 _ => return false,
             }
@@ -668,7 +745,7 @@ impl<'a> PieceParser<'a> {
             None
         };
         let time = if self.want_time {
-            match std::str::from_utf8(time)
+            match std::str::from_utf8(&bytes[time])
                 .ok()
                 .and_then(|t| t.parse::<f64>().ok())
             {
@@ -799,6 +876,36 @@ impl<'a> PieceParser<'a> {
     }
 }
 
+/// Parses two pieces ([`parse_piece`] of each), reading one common row of
+/// each in turn through [`fast_row_pair`] for as long as both have one,
+/// then finishing each on its own.
+fn parse_pair(
+    data: &[u8],
+    a: Range<usize>,
+    b: Range<usize>,
+    roles: &[Role],
+    names: &[String],
+    needs: CsvNeeds,
+) -> [Result<PieceCols, PieceErr>; 2] {
+    let mut pa = PieceParser::new(data, a, roles, names, needs);
+    let mut pb = PieceParser::new(data, b, roles, names, needs);
+    while pa.skip_blank() && pb.skip_blank() {
+        let Some((ra, rb)) = fast_row_pair(
+            &data[..pa.range.end],
+            pa.pos,
+            &data[..pb.range.end],
+            pb.pos,
+            roles,
+        ) else {
+            break;
+        };
+        if !(pa.accept(ra) && pb.accept(rb)) {
+            break;
+        }
+    }
+    [pa.finish(), pb.finish()]
+}
+
 /// Parses the rows of `data[range]` (whole lines).
 fn parse_piece(
     data: &[u8],
@@ -871,8 +978,18 @@ pub fn parse_csv_rows(
     cuts.dedup();
     let ranges: Vec<Range<usize>> = cuts.windows(2).map(|w| w[0]..w[1]).collect();
     let parsed: Vec<Result<PieceCols, PieceErr>> = ranges
-        .par_iter()
-        .map(|r| parse_piece(data, r.clone(), &roles, &h.names, needs))
+        .par_chunks(2)
+        .flat_map_iter(|pair| match pair {
+            [a, b] => Vec::from(parse_pair(
+                data,
+                a.clone(),
+                b.clone(),
+                &roles,
+                &h.names,
+                needs,
+            )),
+            _ => vec![parse_piece(data, pair[0].clone(), &roles, &h.names, needs)],
+        })
         .collect();
 
     let mut pieces = Vec::with_capacity(ranges.len());
@@ -1294,6 +1411,54 @@ mod tests {
         // Header line 1, rows 0..=30000, blank lines after rows 0, 9999,
         // 19998 and 29997.
         assert!(matches!(e, IoError::Parse { line: 30_006, .. }), "{e}");
+    }
+
+    #[test]
+    fn odd_rows_anywhere_in_a_multi_piece_file_parse_like_the_csv_crate() {
+        // Pieces are read two at a time, row by row in lockstep, and each
+        // falls back on its own at a row the fast path declines: odd rows
+        // sprinkled over many pieces must still give the csv crate's cloud.
+        let mut s = 11u64;
+        let mut text = String::from("x,y,z,intensity,ring\n");
+        for i in 0..60_000u64 {
+            let v = |s: &mut u64| (xorshift(s) % 2_000_000) as f32 / 10_000.0 - 100.0;
+            let (x, y, z) = (v(&mut s), v(&mut s), v(&mut s));
+            let row = match xorshift(&mut s) % 400 {
+                0 => format!("{x:e},{y},{z},{},{}\n", i % 256, i % 16),
+                1 => format!(" {x} ,{y},{z},{},{}\n", i % 256, i % 16),
+                2 => format!("+{},{y},{z},{},{}\r\n", x.abs(), i % 256, i % 16),
+                3 => format!("{x},{y:.12},{z},{},{}\n", i % 256, i % 16),
+                4 => format!("{x},{y},{z},{},{}\n\n", i % 256, i % 16),
+                5 => format!("{x},{y},{z},{}.0000000000001,{}\n", i % 256, i % 16),
+                _ => format!("{x},{y},{z},{},{}\n", i % 256, i % 16),
+            };
+            text.push_str(&row);
+        }
+        agree(&text);
+        let rows = parse_csv_rows(
+            text.as_bytes(),
+            Path::new("t.csv"),
+            &ReadOptions::default(),
+            CsvNeeds::ALL,
+        )
+        .unwrap()
+        .unwrap();
+        assert!(rows.pieces.len() >= 6, "{} pieces", rows.pieces.len());
+        // An error in the second piece of a pair and a later one in the
+        // first piece of the next pair: the earlier one is reported.
+        let cut = rows.pieces[1].bytes.start + 100;
+        let nl = cut + text[cut..].find('\n').unwrap() + 1;
+        let mut bad = text.clone();
+        bad.insert_str(nl, "1,2,x,4,5\n");
+        let later = rows.pieces[2].bytes.start + 5_000;
+        let nl2 = later + bad[later..].find('\n').unwrap() + 1;
+        bad.insert_str(nl2, "1,2,3\n");
+        agree(&bad);
+        let e = parse_csv(bad.as_bytes(), Path::new("t.csv"), &ReadOptions::default()).unwrap_err();
+        assert!(
+            matches!(e, IoError::Parse { ref column, .. } if column == "z"),
+            "{e}"
+        );
     }
 
     #[test]
