@@ -157,6 +157,11 @@ pub struct CsvRows {
     pub header: Range<usize>,
     /// The data rows in file order.
     pub pieces: Vec<RowPiece>,
+    /// Per row (point), where it ends (after its line break) as an offset
+    /// from the start of its piece, so that writing kept rows back needs no
+    /// second search for line breaks. Empty when a piece is 4 GiB or more
+    /// (one enormous line); rows are then found by scanning.
+    pub row_ends: Vec<u32>,
     /// The line break the header uses (`\n` or `\r\n`), used after a last
     /// row that has none when rows follow it.
     pub newline: &'static [u8],
@@ -198,6 +203,18 @@ fn row_spans(bytes: &[u8], range: Range<usize>) -> impl Iterator<Item = Range<us
     })
 }
 
+/// `pos` moved past any blank lines (`\n` or `\r\n`) starting there.
+#[inline(always)]
+fn skip_blank_lines(bytes: &[u8], mut pos: usize) -> usize {
+    loop {
+        match bytes.get(pos) {
+            Some(b'\n') => pos += 1,
+            Some(b'\r') if bytes.get(pos + 1) == Some(&b'\n') => pos += 2,
+            _ => return pos,
+        }
+    }
+}
+
 /// Writes the pending run of kept rows and empties it.
 fn flush_run<W: std::io::Write + ?Sized>(
     out: &mut W,
@@ -224,8 +241,34 @@ fn strip_newline(line: &[u8]) -> &[u8] {
 impl CsvRows {
     /// The rows of `piece` in `bytes` (the parsed file), each with its line
     /// break (the file's last row may have none).
-    pub fn rows<'a>(&self, bytes: &'a [u8], piece: &RowPiece) -> impl Iterator<Item = &'a [u8]> {
-        row_spans(bytes, piece.bytes.clone()).map(move |r| &bytes[r])
+    pub fn rows<'a>(
+        &'a self,
+        bytes: &'a [u8],
+        piece: &RowPiece,
+    ) -> impl Iterator<Item = &'a [u8]> + 'a {
+        self.spans(bytes, piece).map(move |r| &bytes[r])
+    }
+
+    /// The byte ranges of `piece`'s rows in `bytes`, each with its line
+    /// break: from the recorded row ends when there are some, else by
+    /// scanning for line breaks.
+    fn spans<'a>(
+        &'a self,
+        bytes: &'a [u8],
+        piece: &RowPiece,
+    ) -> Box<dyn Iterator<Item = Range<usize>> + 'a> {
+        if self.row_ends.is_empty() && piece.rows > 0 {
+            return Box::new(row_spans(bytes, piece.bytes.clone()));
+        }
+        let base = piece.bytes.start;
+        let ends = &self.row_ends[piece.first_row..piece.first_row + piece.rows];
+        let mut prev = base;
+        Box::new(ends.iter().map(move |&e| {
+            let end = base + e as usize;
+            let start = skip_blank_lines(bytes, prev);
+            prev = end;
+            start..end
+        }))
     }
 
     /// Encodes the CSV file of the points `keep` marks (1 = kept; one entry
@@ -272,10 +315,34 @@ impl CsvRows {
         let mut run = 0..0;
         for p in &self.pieces {
             let keep = &keep[p.first_row..p.first_row + p.rows];
-            for (k, row) in row_spans(bytes, p.bytes.clone()).enumerate() {
-                if keep[k] == 0 {
-                    continue;
-                }
+            // Rows from the recorded ends (the common case) or by scanning.
+            let recorded = !self.row_ends.is_empty();
+            let ends = if recorded {
+                &self.row_ends[p.first_row..p.first_row + p.rows]
+            } else {
+                &[][..]
+            };
+            let mut scanned = (!recorded).then(|| row_spans(bytes, p.bytes.clone()));
+            let mut prev = p.bytes.start;
+            for (k, &kept) in keep.iter().enumerate() {
+                let row = match &mut scanned {
+                    None => {
+                        let end = p.bytes.start + ends[k] as usize;
+                        let start = prev;
+                        prev = end;
+                        if kept == 0 {
+                            continue;
+                        }
+                        skip_blank_lines(bytes, start)..end
+                    }
+                    Some(it) => {
+                        let row = it.next().expect("one span per row");
+                        if kept == 0 {
+                            continue;
+                        }
+                        row
+                    }
+                };
                 let i = p.first_row + k;
                 if e < edits.len() && edits[e].row == i {
                     flush_run(out, bytes, &mut run, &mut ends_with_newline)?;
@@ -589,6 +656,8 @@ struct PieceCols {
     intensity: Vec<f32>,
     ring: Vec<u16>,
     time: Vec<f64>,
+    /// Where each row ends (after its line break), from the piece's start.
+    ends: Vec<u32>,
 }
 
 /// Where and why a piece failed.
@@ -662,6 +731,8 @@ struct PieceParser<'a> {
     names: &'a [String],
     want_ring: bool,
     want_time: bool,
+    /// Whether row ends fit `u32` offsets (a piece under 4 GiB).
+    record_ends: bool,
     out: PieceCols,
 }
 
@@ -682,6 +753,7 @@ impl<'a> PieceParser<'a> {
         let lines = memchr::memchr_iter(b'\n', sample).count().max(1);
         let per_row = (sample.len() / lines).max(1);
         let cap = range.len() / per_row + range.len() / per_row / 8 + 16;
+        let record_ends = u32::try_from(range.len()).is_ok();
         PieceParser {
             data,
             pos: range.start,
@@ -691,11 +763,13 @@ impl<'a> PieceParser<'a> {
             names,
             want_ring: needs.ring && roles.contains(&Role::Ring),
             want_time: needs.time && roles.contains(&Role::Time),
+            record_ends,
             out: PieceCols {
                 x: Vec::with_capacity(cap),
                 y: Vec::with_capacity(cap),
                 z: Vec::with_capacity(cap),
                 intensity: Vec::with_capacity(cap),
+                ends: Vec::with_capacity(cap),
                 ..PieceCols::default()
             },
         }
@@ -765,6 +839,9 @@ impl<'a> PieceParser<'a> {
         }
         if let Some(t) = time {
             out.time.push(t);
+        }
+        if self.record_ends {
+            out.ends.push((next - self.range.start) as u32);
         }
         self.row += 1;
         self.pos = next;
@@ -870,6 +947,9 @@ impl<'a> PieceParser<'a> {
                     }));
                 }
                 self.out.time.push(t);
+            }
+            if self.record_ends {
+                self.out.ends.push((self.pos - self.range.start) as u32);
             }
             self.row += 1;
         }
@@ -1071,10 +1151,20 @@ pub fn parse_csv_rows(
     }
     let header_end = bom + h.data_start;
     let head = &bytes[..header_end];
+    let row_ends = if cols.iter().all(|c| c.ends.len() == c.x.len()) {
+        let mut v = Vec::with_capacity(total);
+        for c in &cols {
+            v.extend_from_slice(&c.ends);
+        }
+        v
+    } else {
+        Vec::new()
+    };
     Ok(Some(CsvRows {
         cloud,
         header: 0..header_end,
         pieces,
+        row_ends,
         newline: if head.ends_with(b"\r\n") {
             b"\r\n"
         } else {
@@ -1444,6 +1534,17 @@ mod tests {
         .unwrap()
         .unwrap();
         assert!(rows.pieces.len() >= 6, "{} pieces", rows.pieces.len());
+        // Kept rows written from the recorded row ends equal those found by
+        // scanning for line breaks (CRLF and blank lines included).
+        let keep: Vec<u8> = (0..rows.cloud.len())
+            .map(|_| u8::from(xorshift(&mut s).is_multiple_of(3)))
+            .collect();
+        let mut scanned = rows.clone();
+        scanned.row_ends.clear();
+        assert_eq!(
+            rows.encode_subset(text.as_bytes(), &keep, &[], None),
+            scanned.encode_subset(text.as_bytes(), &keep, &[], None)
+        );
         // An error in the second piece of a pair and a later one in the
         // first piece of the next pair: the earlier one is reported.
         let cut = rows.pieces[1].bytes.start + 100;
@@ -1500,10 +1601,26 @@ mod tests {
         )
         .unwrap()
         .unwrap();
+        assert_eq!(rows.row_ends.len(), 5, "row ends recorded");
+        // The same rows found by scanning for line breaks (what happens when
+        // a piece is too large for recorded ends) must give the same bytes.
+        let mut scanned = rows.clone();
+        scanned.row_ends.clear();
         let lines = ["1,0,0,1", "2,0,0,2", "3,0,0,3", "4,0,0,4", "5,0,0,5"];
         let mut added = PointCloud::default();
         added.push(6.0, 0.0, 0.0, 6.0, 0);
-        for pattern in 0u32..32 {
+        for r in [&rows, &scanned] {
+            let got: Vec<&[u8]> = r.rows(text, &r.pieces[0]).collect();
+            let want: Vec<&[u8]> = vec![
+                b"1,0,0,1\n",
+                b"2,0,0,2\n",
+                b"3,0,0,3\n",
+                b"4,0,0,4\n",
+                b"5,0,0,5",
+            ];
+            assert_eq!(got, want);
+        }
+        for (pattern, rows) in (0u32..32).flat_map(|p| [(p, &rows), (p, &scanned)]) {
             let keep: Vec<u8> = (0..5).map(|k| ((pattern >> k) & 1) as u8).collect();
             let kept: Vec<&str> = (0..5).filter(|&k| keep[k] == 1).map(|k| lines[k]).collect();
             let mut want = String::from("x,y,z,intensity\n");
