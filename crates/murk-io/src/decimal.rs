@@ -193,14 +193,20 @@ fn swar_prefix(bytes: &[u8]) -> Option<(f32, usize)> {
         // Eight or more integer digits: rare in a point cloud.
         return scalar_prefix(bytes);
     }
-    let mut m = digits_value(w, a);
+    let mut m;
     let mut p = start + a;
     let mut decimals = 0usize;
     if bytes[p] == b'.' {
         p += 1;
-        let w = load8(bytes, p);
-        let b = leading_digits(w);
-        m = m * POW10_U64[b] + digits_value(w, b);
+        let wf = load8(bytes, p);
+        let b = leading_digits(wf);
+        m = if a + b <= 8 {
+            // The common cell: the integer digits (a ≤ 7) with the fraction
+            // digits after them make one word, summed once.
+            digits_value((w & ((1 << (8 * a)) - 1)) | (wf << (8 * a)), a + b)
+        } else {
+            digits_value(w, a) * POW10_U64[b] + digits_value(wf, b)
+        };
         p += b;
         decimals = b;
         if b == 8 {
@@ -218,6 +224,8 @@ fn swar_prefix(bytes: &[u8]) -> Option<(f32, usize)> {
         }
     } else if a == 0 {
         return None;
+    } else {
+        m = digits_value(w, a);
     }
     Some((to_f32(neg, m, decimals)?, p))
 }
