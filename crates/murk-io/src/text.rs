@@ -647,17 +647,26 @@ enum Role {
     Time,
 }
 
+/// One parsed row of a piece.
+#[derive(Clone, Copy)]
+struct PieceRow {
+    /// x, y, z and intensity.
+    xyzi: [f32; 4],
+    /// Where the row ends (after its line break), from the piece's start;
+    /// 0 when the piece does not record ends.
+    end: u32,
+}
+
 /// The columns of one piece.
 #[derive(Default)]
 struct PieceCols {
-    x: Vec<f32>,
-    y: Vec<f32>,
-    z: Vec<f32>,
-    intensity: Vec<f32>,
+    /// The rows: one push per row while parsing (a push per column costs a
+    /// capacity check each); split into columns when pieces are joined.
+    rows: Vec<PieceRow>,
     ring: Vec<u16>,
     time: Vec<f64>,
-    /// Where each row ends (after its line break), from the piece's start.
-    ends: Vec<u32>,
+    /// Whether `rows[..].end` holds the row ends.
+    ends: bool,
 }
 
 /// Where and why a piece failed.
@@ -765,11 +774,8 @@ impl<'a> PieceParser<'a> {
             want_time: needs.time && roles.contains(&Role::Time),
             record_ends,
             out: PieceCols {
-                x: Vec::with_capacity(cap),
-                y: Vec::with_capacity(cap),
-                z: Vec::with_capacity(cap),
-                intensity: Vec::with_capacity(cap),
-                ends: Vec::with_capacity(cap),
+                rows: Vec::with_capacity(cap),
+                ends: record_ends,
                 ..PieceCols::default()
             },
         }
@@ -830,18 +836,19 @@ impl<'a> PieceParser<'a> {
             None
         };
         let out = &mut self.out;
-        out.x.push(v[0]);
-        out.y.push(v[1]);
-        out.z.push(v[2]);
-        out.intensity.push(v[3]);
+        out.rows.push(PieceRow {
+            xyzi: v,
+            end: if self.record_ends {
+                (next - self.range.start) as u32
+            } else {
+                0
+            },
+        });
         if let Some(r) = ring {
             out.ring.push(r);
         }
         if let Some(t) = time {
             out.time.push(t);
-        }
-        if self.record_ends {
-            out.ends.push((next - self.range.start) as u32);
         }
         self.row += 1;
         self.pos = next;
@@ -913,10 +920,12 @@ impl<'a> PieceParser<'a> {
                     }));
                 }
             }
-            self.out.x.push(v[0]);
-            self.out.y.push(v[1]);
-            self.out.z.push(v[2]);
-            self.out.intensity.push(v[3]);
+            let end = if self.record_ends {
+                (self.pos - self.range.start) as u32
+            } else {
+                0
+            };
+            self.out.rows.push(PieceRow { xyzi: v, end });
             if want_ring {
                 let r = cell_ring(cells[4])
                     .map_err(|reason| {
@@ -947,9 +956,6 @@ impl<'a> PieceParser<'a> {
                     }));
                 }
                 self.out.time.push(t);
-            }
-            if self.record_ends {
-                self.out.ends.push((self.pos - self.range.start) as u32);
             }
             self.row += 1;
         }
@@ -1081,9 +1087,9 @@ pub fn parse_csv_rows(
                 pieces.push(RowPiece {
                     bytes: bom + h.data_start + r.start..bom + h.data_start + r.end,
                     first_row: total,
-                    rows: c.x.len(),
+                    rows: c.rows.len(),
                 });
-                total += c.x.len();
+                total += c.rows.len();
                 cols.push(c);
             }
             Err(e) => {
@@ -1105,18 +1111,18 @@ pub fn parse_csv_rows(
             }
         }
     }
-    let join_f32 = |get: fn(&PieceCols) -> &Vec<f32>| {
+    let join_f32 = |k: usize| {
         let mut v = Vec::with_capacity(total);
         for c in &cols {
-            v.extend_from_slice(get(c));
+            v.extend(c.rows.iter().map(|r| r.xyzi[k]));
         }
         v
     };
     let mut cloud = PointCloud {
-        x: join_f32(|c| &c.x),
-        y: join_f32(|c| &c.y),
-        z: join_f32(|c| &c.z),
-        intensity: join_f32(|c| &c.intensity),
+        x: join_f32(0),
+        y: join_f32(1),
+        z: join_f32(2),
+        intensity: join_f32(3),
         ring: Vec::new(),
         time: None,
         intensity_scale: opts.scale_for(PointFormat::Csv),
@@ -1151,10 +1157,10 @@ pub fn parse_csv_rows(
     }
     let header_end = bom + h.data_start;
     let head = &bytes[..header_end];
-    let row_ends = if cols.iter().all(|c| c.ends.len() == c.x.len()) {
+    let row_ends = if cols.iter().all(|c| c.ends) {
         let mut v = Vec::with_capacity(total);
         for c in &cols {
-            v.extend_from_slice(&c.ends);
+            v.extend(c.rows.iter().map(|r| r.end));
         }
         v
     } else {
