@@ -21,8 +21,11 @@
 //! murk, pandas, VeloView and most tools write) is split at newlines into
 //! [`PIECE`]-byte pieces parsed in parallel (rayon, results joined in file
 //! order, so the cloud and any error are the same on any thread count):
-//! each row is walked cell by cell straight from the piece's bytes (no
-//! separate line search) and only the cells murk reads are parsed, plain
+//! pieces are taken two at a time, one cell of a row of each in turn (a
+//! row is a chain of dependent loads; two chains keep the core busy), each
+//! row is walked cell by cell straight from the piece's bytes (no separate
+//! line search, and where each row ends is kept) and only the cells murk
+//! reads are parsed, plain
 //! decimals by the `decimal` module's reader (exactly `str::parse::<f32>`'s
 //! result, eight digits at a time), anything else by the standard library. Files with quoted
 //! data cells go through the `csv` crate. Both accept and refuse the same
