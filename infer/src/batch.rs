@@ -503,7 +503,7 @@ const STAGED_MAX: usize = 64;
 /// returned (files that succeeded are written).
 ///
 /// Workers (rayon) read, apply and write each output to a temporary file;
-/// [`COMMITTERS`] plain threads sync those files and rename them into
+/// four plain threads sync those files and rename them into
 /// place. A sync waits on the disk rather than working, so this keeps the
 /// cores busy, and concurrent syncs let the file system commit many files
 /// at once. Each output is still synced before it appears under its name.

@@ -397,7 +397,11 @@ fn many_files_commit_once_each_before_progress_and_leave_no_temporary_files() {
     assert_eq!(p.jobs.len(), 150);
     let seen = std::sync::Mutex::new(Vec::new());
     let e = run(&fog(40.0), &p, &BatchOptions::default(), &|f| {
-        assert!(f.output.is_file(), "{} reported before it exists", f.output.display());
+        assert!(
+            f.output.is_file(),
+            "{} reported before it exists",
+            f.output.display()
+        );
         seen.lock().unwrap().push(f.output.clone());
     })
     .unwrap_err();
