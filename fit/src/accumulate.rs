@@ -52,7 +52,7 @@ pub struct RecordingRow {
     /// Returns in the file.
     pub points: u64,
     /// This recording's returns nearer than the noise windows' far end, per
-    /// step of [`ROW_OCCLUDER_STEP_M`]: what could hide its own ghost and
+    /// step of `ROW_OCCLUDER_STEP_M` (0.1 m): what could hide its own ghost and
     /// ring returns (their visibility varies with the weather's density).
     pub occluders: Vec<u32>,
     /// Rays of the recording (cells × revolutions of the reference).
@@ -64,7 +64,7 @@ pub const ROW_OCCLUDER_STEP_M: f64 = 0.1;
 
 impl RecordingRow {
     /// Share of this recording's rays open (no return nearer) at the start of
-    /// each step of [`ROW_OCCLUDER_STEP_M`].
+    /// each step of `ROW_OCCLUDER_STEP_M` (0.1 m).
     pub fn open_rays(&self) -> Vec<f64> {
         let mut acc = 0u64;
         self.occluders

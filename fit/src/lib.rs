@@ -20,7 +20,7 @@
 //! defaults) → [`FitParams::check`] → [`FitValidParams::fit`] → a
 //! [`FittedTable`] (the table and the data of its figures).
 //!
-//! **Architecture invariant:** statistics do no I/O. [`reference`],
+//! **Architecture invariant:** statistics do no I/O. [`reference`](mod@reference),
 //! [`pairing`], [`survival`], [`quantile_slope`], [`radar`] and [`stats`] work
 //! on in-memory values and are unit-tested against known answers; only
 //! [`driver`] reads files (through `murk-io`) and streams recordings, keeping
