@@ -268,8 +268,9 @@ pub fn write_cloud_with(
     cloud: &PointCloud,
     opts: &WriteOptions,
 ) -> Result<(), IoError> {
-    let bytes = encode_cloud(cloud, opts, path)?;
-    write_atomic(path, &bytes)
+    stage_cloud_with(path, cloud, opts)?
+        .commit()
+        .map_err(atomic_error(path))
 }
 
 /// The first half of [`write_cloud_with`]: the encoded cloud in a temporary
@@ -283,18 +284,14 @@ pub fn stage_cloud_with(
     opts: &WriteOptions,
 ) -> Result<murk_types::StagedFile, IoError> {
     let bytes = encode_cloud(cloud, opts, path)?;
-    murk_types::stage_atomic(path, &bytes).map_err(|e| IoError::Io {
-        path: path.to_path_buf(),
-        action: e.action,
-        source: e.source,
-    })
+    murk_types::stage_atomic(path, &bytes).map_err(atomic_error(path))
 }
 
-/// Writes `bytes` to `path` atomically ([`murk_types::write_atomic`]).
-fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
-    murk_types::write_atomic(path, bytes).map_err(|e| IoError::Io {
+/// The error of a failed atomic write of `path`.
+fn atomic_error(path: &Path) -> impl Fn(murk_types::AtomicWriteError) -> IoError + '_ {
+    move |e| IoError::Io {
         path: path.to_path_buf(),
         action: e.action,
         source: e.source,
-    })
+    }
 }

@@ -206,16 +206,45 @@ fn row_spans(bytes: &[u8], range: Range<usize>) -> impl Iterator<Item = Range<us
     })
 }
 
+/// The rows of a piece as byte ranges (see [`CsvRows::spans`]).
+enum Spans<'a> {
+    /// From the recorded row ends: each row runs from the previous row's
+    /// end (`base`, the piece's start, for the first) to its own.
+    Recorded {
+        base: usize,
+        prev: usize,
+        ends: std::slice::Iter<'a, u32>,
+    },
+    /// Found by scanning for line breaks (no recorded ends).
+    Scanned(Box<dyn Iterator<Item = Range<usize>> + 'a>),
+}
+
+impl Iterator for Spans<'_> {
+    type Item = Range<usize>;
+
+    #[inline]
+    fn next(&mut self) -> Option<Range<usize>> {
+        match self {
+            Spans::Recorded { base, prev, ends } => {
+                let end = *base + *ends.next()? as usize;
+                Some(std::mem::replace(prev, end)..end)
+            }
+            Spans::Scanned(it) => it.next(),
+        }
+    }
+}
+
 /// `pos` moved past any blank lines (`\n` or `\r\n`) starting there.
 #[inline(always)]
 fn skip_blank_lines(bytes: &[u8], mut pos: usize) -> usize {
-    loop {
-        match bytes.get(pos) {
-            Some(b'\n') => pos += 1,
-            Some(b'\r') if bytes.get(pos + 1) == Some(&b'\n') => pos += 2,
-            _ => return pos,
+    while pos < bytes.len() {
+        match bytes[pos] {
+            b'\n' => pos += 1,
+            b'\r' if bytes.get(pos + 1) == Some(&b'\n') => pos += 2,
+            _ => break,
         }
     }
+    pos
 }
 
 /// Writes the pending run of kept rows and empties it.
@@ -249,29 +278,24 @@ impl CsvRows {
         bytes: &'a [u8],
         piece: &RowPiece,
     ) -> impl Iterator<Item = &'a [u8]> + 'a {
-        self.spans(bytes, piece).map(move |r| &bytes[r])
+        self.spans(bytes, piece)
+            .map(move |r| &bytes[skip_blank_lines(bytes, r.start)..r.end])
     }
 
     /// The byte ranges of `piece`'s rows in `bytes`, each with its line
-    /// break: from the recorded row ends when there are some, else by
-    /// scanning for line breaks.
-    fn spans<'a>(
-        &'a self,
-        bytes: &'a [u8],
-        piece: &RowPiece,
-    ) -> Box<dyn Iterator<Item = Range<usize>> + 'a> {
-        if self.row_ends.is_empty() && piece.rows > 0 {
-            return Box::new(row_spans(bytes, piece.bytes.clone()));
+    /// break, from the recorded row ends when there are some, else by
+    /// scanning for line breaks. A range may start with blank lines (the
+    /// ones before its row); [`skip_blank_lines`] on its start drops them,
+    /// which callers do only for the rows they use.
+    fn spans<'a>(&'a self, bytes: &'a [u8], piece: &RowPiece) -> Spans<'a> {
+        if self.row_ends.is_empty() {
+            return Spans::Scanned(Box::new(row_spans(bytes, piece.bytes.clone())));
         }
-        let base = piece.bytes.start;
-        let ends = &self.row_ends[piece.first_row..piece.first_row + piece.rows];
-        let mut prev = base;
-        Box::new(ends.iter().map(move |&e| {
-            let end = base + e as usize;
-            let start = skip_blank_lines(bytes, prev);
-            prev = end;
-            start..end
-        }))
+        Spans::Recorded {
+            base: piece.bytes.start,
+            prev: piece.bytes.start,
+            ends: self.row_ends[piece.first_row..piece.first_row + piece.rows].iter(),
+        }
     }
 
     /// Encodes the CSV file of the points `keep` marks (1 = kept; one entry
@@ -318,34 +342,11 @@ impl CsvRows {
         let mut run = 0..0;
         for p in &self.pieces {
             let keep = &keep[p.first_row..p.first_row + p.rows];
-            // Rows from the recorded ends (the common case) or by scanning.
-            let recorded = !self.row_ends.is_empty();
-            let ends = if recorded {
-                &self.row_ends[p.first_row..p.first_row + p.rows]
-            } else {
-                &[][..]
-            };
-            let mut scanned = (!recorded).then(|| row_spans(bytes, p.bytes.clone()));
-            let mut prev = p.bytes.start;
-            for (k, &kept) in keep.iter().enumerate() {
-                let row = match &mut scanned {
-                    None => {
-                        let end = p.bytes.start + ends[k] as usize;
-                        let start = prev;
-                        prev = end;
-                        if kept == 0 {
-                            continue;
-                        }
-                        skip_blank_lines(bytes, start)..end
-                    }
-                    Some(it) => {
-                        let row = it.next().expect("one span per row");
-                        if kept == 0 {
-                            continue;
-                        }
-                        row
-                    }
-                };
+            for (k, (row, &kept)) in self.spans(bytes, p).zip(keep).enumerate() {
+                if kept == 0 {
+                    continue;
+                }
+                let row = skip_blank_lines(bytes, row.start)..row.end;
                 let i = p.first_row + k;
                 if e < edits.len() && edits[e].row == i {
                     flush_run(out, bytes, &mut run, &mut ends_with_newline)?;
@@ -596,7 +597,9 @@ fn fast_row_at(buf: &[u8], pos: usize, roles: &[Role]) -> Option<FastRow> {
 /// at 32 ns per row alone, 17 with two rows interleaved). Taking the same
 /// cell of two rows in turn gives the core two independent chains to run
 /// side by side; a row at a time would not, as one row's work fills the
-/// core's window before the other's starts.
+/// core's window before the other's starts. It repeats [`fast_row_at`]'s
+/// steps on purpose: one const-generic reader of `N` rows, with a loop over
+/// the rows inside each cell, parsed 25 % slower for both.
 #[inline]
 fn fast_row_pair(
     ba: &[u8],
@@ -787,17 +790,8 @@ impl<'a> PieceParser<'a> {
     /// Skips blank lines; false at the piece's end.
     #[inline(always)]
     fn skip_blank(&mut self) -> bool {
-        let bytes = &self.data[..self.range.end];
-        loop {
-            if self.pos >= self.range.end {
-                return false;
-            }
-            match bytes[self.pos] {
-                b'\n' => self.pos += 1,
-                b'\r' if bytes.get(self.pos + 1) == Some(&b'\n') => self.pos += 2,
-                _ => return true,
-            }
-        }
+        self.pos = skip_blank_lines(&self.data[..self.range.end], self.pos);
+        self.pos < self.range.end
     }
 
     /// Skips blank lines, then parses the next row if [`fast_row_at`] takes
@@ -838,24 +832,27 @@ impl<'a> PieceParser<'a> {
         } else {
             None
         };
-        let out = &mut self.out;
-        out.rows.push(PieceRow {
-            xyzi: v,
-            end: if self.record_ends {
-                (next - self.range.start) as u32
-            } else {
-                0
-            },
-        });
+        self.pos = next;
+        self.push_row(v);
         if let Some(r) = ring {
-            out.ring.push(r);
+            self.out.ring.push(r);
         }
         if let Some(t) = time {
-            out.time.push(t);
+            self.out.time.push(t);
         }
         self.row += 1;
-        self.pos = next;
         true
+    }
+
+    /// Stores a row's x, y, z and intensity; the row ends at `self.pos`.
+    #[inline(always)]
+    fn push_row(&mut self, xyzi: [f32; 4]) {
+        let end = if self.record_ends {
+            (self.pos - self.range.start) as u32
+        } else {
+            0
+        };
+        self.out.rows.push(PieceRow { xyzi, end });
     }
 
     /// Parses the rest of the piece: the fast path where it applies, the
@@ -923,12 +920,7 @@ impl<'a> PieceParser<'a> {
                     }));
                 }
             }
-            let end = if self.record_ends {
-                (self.pos - self.range.start) as u32
-            } else {
-                0
-            };
-            self.out.rows.push(PieceRow { xyzi: v, end });
+            self.push_row(v);
             if want_ring {
                 let r = cell_ring(cells[4])
                     .map_err(|reason| {

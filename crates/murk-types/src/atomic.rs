@@ -113,7 +113,6 @@ impl StagedFile {
 
     /// Syncs the temporary file's data and renames it over the target.
     pub fn commit(self) -> Result<(), AtomicWriteError> {
-        let err = |action: &'static str| move |source| AtomicWriteError { action, source };
         self.tmp.as_file().sync_data().map_err(err("sync"))?;
         self.tmp
             .persist(&self.path)
@@ -128,7 +127,6 @@ fn stage(
     path: &Path,
     fill: impl FnOnce(&mut std::fs::File) -> std::io::Result<()>,
 ) -> Result<StagedFile, AtomicWriteError> {
-    let err = |action: &'static str| move |source| AtomicWriteError { action, source };
     let dir = match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),
@@ -148,6 +146,11 @@ fn stage(
         tmp,
         path: path.to_path_buf(),
     })
+}
+
+/// The error of a failed `action`.
+fn err(action: &'static str) -> impl FnOnce(std::io::Error) -> AtomicWriteError {
+    move |source| AtomicWriteError { action, source }
 }
 
 #[cfg(test)]
