@@ -64,20 +64,31 @@ fn fit_inputs(inputs: &FitInputs, params: &FitValidParams) -> Result<FittedTable
         });
     }
     let grid = CellGrid::new(&inputs.lidar);
-    let (reference, mut digests) = build_reference(inputs, &clear, &grid, params)?;
+    let (reference, mut digests, empty_clear) = build_reference(inputs, &clear, &grid, params)?;
+    // Clear recordings the reference is built from (not the empty ones).
+    let clear_used = clear.len() - empty_clear.len();
+    if clear_used == 0 {
+        return Err(FitError::NoClearReference {
+            path: inputs.dir.clone(),
+            reason: format!(
+                "every one of the {} clear recordings holds no point",
+                clear.len()
+            ),
+        });
+    }
     if reference.present().is_empty() {
         return Err(FitError::NoClearReference {
             path: inputs.dir.clone(),
             reason: format!(
                 "the {} clear recordings share no stable return (presence ≥ {})",
-                clear.len(),
+                clear_used,
                 params.reference_min_presence()
             ),
         });
     }
     let loo = reference.leave_one_out();
     let (lk, lt) = loo.iter().fold((0u64, 0u64), |a, r| (a.0 + r.0, a.1 + r.1));
-    let clear_rate = (clear.len() >= 2 && lt > 0).then(|| lk as f64 / lt as f64);
+    let clear_rate = (clear_used >= 2 && lt > 0).then(|| lk as f64 / lt as f64);
     let dropout_clear = clear_rate.map(|r| 1.0 - r);
 
     // Rain conversion from the metadata, before any point is read: rain
@@ -103,7 +114,7 @@ fn fit_inputs(inputs: &FitInputs, params: &FitValidParams) -> Result<FittedTable
         .any(|r| r.class == WeatherClass::Rain);
     let conversion = has_rain.then(|| rain_conversion(&rain_pairs));
 
-    let mut excluded = Vec::new();
+    let mut excluded = empty_clear;
     let mut jobs = Vec::new();
     for r in inputs
         .recordings
@@ -139,8 +150,9 @@ fn fit_inputs(inputs: &FitInputs, params: &FitValidParams) -> Result<FittedTable
             .chain(params.sweep_bands().iter())
             .map(|b| b.min),
     );
-    let (accs, degraded_digests) =
+    let (accs, degraded_digests, empty_degraded) =
         accumulate_degraded(inputs, &jobs, &reference, &partition, params)?;
+    excluded.extend(empty_degraded);
     digests.extend(degraded_digests);
 
     let mut weathers = BTreeMap::new();
@@ -172,7 +184,7 @@ fn fit_inputs(inputs: &FitInputs, params: &FitValidParams) -> Result<FittedTable
     diagnostics.clear_mor = clear.iter().filter_map(|r| r.mor).collect();
 
     let clear_coefficients = ClearCoefficients {
-        recordings: clear.len() as u32,
+        recordings: clear_used as u32,
         reference_cells: reference.present().len() as u64,
         no_change_rate: clear_rate,
         no_change_rate_uncertainty: bootstrap_rate(

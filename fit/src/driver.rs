@@ -21,7 +21,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use murk_campaign::Campaign;
 use murk_io::ReadOptions;
-use murk_types::{LidarSpec, PointFormat, WeatherClass};
+use murk_types::{ExcludedRecording, LidarSpec, PointFormat, WeatherClass};
 use rayon::prelude::*;
 use sha2::{Digest, Sha256};
 
@@ -265,29 +265,58 @@ where
     }
 }
 
+/// The exclusion of a recording whose file holds no point: it says nothing
+/// about the weather (a recorder that saved nothing), and counted it would
+/// read as every return lost.
+fn no_points(r: &RecordingInput) -> ExcludedRecording {
+    ExcludedRecording {
+        recording: r.id.clone(),
+        weather: r.class,
+        reason: format!("{}: the file holds no point", r.lidar.display()),
+    }
+}
+
+/// What [`build_reference`] returns: the reference, the digests of the
+/// files read, and the clear recordings left out (no point).
+pub type Reference = (
+    ClearReference,
+    Vec<(PathBuf, String)>,
+    Vec<ExcludedRecording>,
+);
+
 /// The clear reference of `recs` (all clear): images in parallel, then the
-/// reference. Returns the digests of the files read.
+/// reference. Returns the digests of the files read, and the recordings
+/// left out because their file holds no point.
 pub fn build_reference(
     inputs: &FitInputs,
     recs: &[&RecordingInput],
     grid: &CellGrid,
     params: &FitValidParams,
-) -> Result<(ClearReference, Vec<(PathBuf, String)>), FitError> {
-    let images: Vec<Result<(CellImage, String), FitError>> = recs
+) -> Result<Reference, FitError> {
+    let images: Vec<Result<(Option<CellImage>, String), FitError>> = recs
         .par_iter()
         .map(|r| {
             let (points, digest) = read_lidar(&r.lidar, &inputs.lidar, grid)?;
-            Ok((CellImage::from_points(&points, grid.cells()), digest))
+            let img = (!points.is_empty()).then(|| CellImage::from_points(&points, grid.cells()));
+            Ok((img, digest))
         })
         .collect();
     let mut imgs = Vec::with_capacity(images.len());
     let mut digests = Vec::with_capacity(images.len());
+    let mut excluded = Vec::new();
     for (r, res) in recs.iter().zip(images) {
         let (img, d) = res?;
-        imgs.push(img);
+        match img {
+            Some(img) => imgs.push(img),
+            None => excluded.push(no_points(r)),
+        }
         digests.push((r.lidar.clone(), d));
     }
-    Ok((ClearReference::build(grid.clone(), &imgs, params), digests))
+    Ok((
+        ClearReference::build(grid.clone(), &imgs, params),
+        digests,
+        excluded,
+    ))
 }
 
 /// The per-weather accumulators of one worker.
@@ -296,6 +325,8 @@ pub struct WorkerState {
     pub accs: BTreeMap<WeatherClass, WeatherAcc>,
     /// `(job index, file digest)`.
     pub digests: Vec<(usize, String)>,
+    /// Jobs left out because their file holds no point.
+    pub empty: Vec<usize>,
 }
 
 /// A degraded recording ready for pairing: its input and its MOR.
@@ -308,8 +339,13 @@ pub struct DegradedJob<'a> {
 }
 
 /// What [`accumulate_degraded`] returns: the accumulator of every weather,
-/// and the SHA-256 of every file read.
-pub type Accumulated = (BTreeMap<WeatherClass, WeatherAcc>, Vec<(PathBuf, String)>);
+/// the SHA-256 of every file read, and the recordings left out because
+/// their file holds no point.
+pub type Accumulated = (
+    BTreeMap<WeatherClass, WeatherAcc>,
+    Vec<(PathBuf, String)>,
+    Vec<ExcludedRecording>,
+);
 
 /// Streams the degraded recordings through pairing into accumulators.
 pub fn accumulate_degraded(
@@ -327,10 +363,16 @@ pub fn accumulate_degraded(
         || WorkerState {
             accs: BTreeMap::new(),
             digests: Vec::new(),
+            empty: Vec::new(),
         },
         |i, s| {
             let job = &jobs[i];
             let (points, digest) = read_lidar(&job.input.lidar, &inputs.lidar, grid)?;
+            s.digests.push((i, digest));
+            if points.is_empty() {
+                s.empty.push(i);
+                return Ok(());
+            }
             let tally = pair_recording(reference, &points, params);
             s.accs
                 .entry(job.input.class)
@@ -345,13 +387,14 @@ pub fn accumulate_degraded(
                     params,
                     rs,
                 );
-            s.digests.push((i, digest));
             Ok(())
         },
     )?;
     let mut accs: BTreeMap<WeatherClass, WeatherAcc> = BTreeMap::new();
     let mut digests = Vec::new();
+    let mut empty = Vec::new();
     for s in states {
+        empty.extend(s.empty);
         for (k, a) in s.accs {
             match accs.get_mut(&k) {
                 Some(m) => m.merge(a),
@@ -366,11 +409,16 @@ pub fn accumulate_degraded(
         a.finish();
     }
     digests.sort();
+    empty.sort_unstable();
     Ok((
         accs,
         digests
             .into_iter()
             .map(|(i, d)| (jobs[i].input.lidar.clone(), d))
+            .collect(),
+        empty
+            .into_iter()
+            .map(|i| no_points(jobs[i].input))
             .collect(),
     ))
 }

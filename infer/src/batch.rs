@@ -2,9 +2,11 @@
 //! which output), then run (read, apply, write, in parallel).
 //!
 //! - Inputs are files or folders. A folder is walked recursively in name
-//!   order; files in it whose extension is not a point-cloud format, and
-//!   hidden files, are listed in [`Plan::skipped`] with the reason (never
-//!   dropped silently). A file named explicitly must be a point cloud.
+//!   order ([`murk_types::walk_folder`], shared with `murk convert`); files
+//!   in it whose extension is not a point-cloud format, hidden files, and
+//!   symbolic links back into folders already walked (a loop such as `sub/up
+//!   -> ..`) are listed in [`Plan::skipped`] with the reason (never dropped
+//!   silently). A file named explicitly must be a point cloud.
 //! - Outputs keep the relative path (a file argument: its name; a file found
 //!   in a folder: its path below the folder) under the output folder, with
 //!   the extension of the output format. Two inputs that map to the same
@@ -158,62 +160,6 @@ fn canonical(p: &Path) -> Result<PathBuf, InferError> {
     })
 }
 
-/// Walks `dir` recursively in name order, appending `(file, relative key)`.
-fn walk(
-    dir: &Path,
-    prefix: &str,
-    exclude: &Path,
-    files: &mut Vec<(PathBuf, String)>,
-    skipped: &mut Vec<Skipped>,
-) -> Result<(), InferError> {
-    let rd = std::fs::read_dir(dir).map_err(|source| InferError::Fs {
-        path: dir.to_path_buf(),
-        action: "list folder",
-        source,
-    })?;
-    let mut entries = Vec::new();
-    for e in rd {
-        let e = e.map_err(|source| InferError::Fs {
-            path: dir.to_path_buf(),
-            action: "list folder",
-            source,
-        })?;
-        entries.push(e.path());
-    }
-    entries.sort();
-    for p in entries {
-        let name = p
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        let key = if prefix.is_empty() {
-            name.clone()
-        } else {
-            format!("{prefix}/{name}")
-        };
-        if name.starts_with('.') {
-            skipped.push(Skipped {
-                path: p,
-                reason: "hidden file or folder".into(),
-            });
-            continue;
-        }
-        if p.is_dir() {
-            if canonical(&p)? == exclude {
-                skipped.push(Skipped {
-                    path: p,
-                    reason: "the output folder".into(),
-                });
-                continue;
-            }
-            walk(&p, &key, exclude, files, skipped)?;
-        } else {
-            files.push((p, key));
-        }
-    }
-    Ok(())
-}
-
 /// Matches every input with its output under `out_dir` (created if needed)
 /// and checks that nothing would be overwritten or written twice.
 pub fn plan(inputs: &[PathBuf], out_dir: &Path, opts: &BatchOptions) -> Result<Plan, InferError> {
@@ -240,9 +186,14 @@ pub fn plan(inputs: &[PathBuf], out_dir: &Path, opts: &BatchOptions) -> Result<P
                             .into(),
                 });
             }
-            let mut files = Vec::new();
-            walk(inp, "", &out_canon, &mut files, &mut skipped)?;
-            found.extend(files.into_iter().map(|(p, k)| (p, k, false)));
+            // The one folder walk of murk: name order, hidden entries and
+            // the output folder left out, symbolic-link loops detected.
+            let walk = murk_types::walk_folder(inp, std::slice::from_ref(&out_canon))?;
+            skipped.extend(walk.left_out.into_iter().map(|l| Skipped {
+                path: l.path,
+                reason: l.reason,
+            }));
+            found.extend(walk.files.into_iter().map(|f| (f.path, f.key, false)));
         } else {
             let name = inp
                 .file_name()
@@ -513,7 +464,32 @@ pub fn run(
     opts: &BatchOptions,
     progress: &(dyn Fn(&FileReport) + Sync),
 ) -> Result<BatchReport, InferError> {
+    run_until(
+        applier,
+        plan,
+        opts,
+        progress,
+        &std::sync::atomic::AtomicBool::new(false),
+    )
+}
+
+/// [`run`] that stops early when `stop` becomes true (Ctrl-C): no new
+/// file is started, the files being worked on are finished, committed and
+/// reported to `progress`, and the result is
+/// [`InferError::Interrupted`] saying how many files are in place. Every
+/// output then present is complete (outputs appear only by rename) and no
+/// temporary file is left.
+pub fn run_until(
+    applier: &Applier,
+    plan: &Plan,
+    opts: &BatchOptions,
+    progress: &(dyn Fn(&FileReport) + Sync),
+    stop: &std::sync::atomic::AtomicBool,
+) -> Result<BatchReport, InferError> {
+    use std::sync::atomic::Ordering;
     let n = plan.jobs.len();
+    // Jobs never started because of `stop`.
+    let not_started = std::sync::atomic::AtomicUsize::new(0);
     let (tx, rx) = std::sync::mpsc::sync_channel::<(usize, FileReport, StagedFile)>(STAGED_MAX);
     // Shared by the committers only: when the last of them ends (even by a
     // panic), the receiver goes and a worker's send fails instead of
@@ -546,14 +522,20 @@ pub fn run(
             .jobs
             .par_iter()
             .enumerate()
-            .map_with(tx, |tx, (i, j)| match stage_job(applier, j, opts) {
-                // A send fails only when every committer is gone (a panic,
-                // re-raised below); the temporary file is then dropped.
-                Ok((report, staged)) => tx
-                    .send((i, report, staged))
-                    .err()
-                    .map(|_| InferError::Conflict("the committing threads stopped".into())),
-                Err(e) => Some(e),
+            .map_with(tx, |tx, (i, j)| {
+                if stop.load(Ordering::Relaxed) {
+                    not_started.fetch_add(1, Ordering::Relaxed);
+                    return Some(InferError::Interrupted { done: 0, total: n });
+                }
+                match stage_job(applier, j, opts) {
+                    // A send fails only when every committer is gone (a panic,
+                    // re-raised below); the temporary file is then dropped.
+                    Ok((report, staged)) => tx
+                        .send((i, report, staged))
+                        .err()
+                        .map(|_| InferError::Conflict("the committing threads stopped".into())),
+                    Err(e) => Some(e),
+                }
             })
             .collect();
         let committed: Vec<(usize, Result<FileReport, InferError>)> = committers
@@ -571,6 +553,10 @@ pub fn run(
         .into_iter()
         .map(|r| r.expect("every job is staged or failed"))
         .collect();
+    if not_started.load(Ordering::Relaxed) > 0 {
+        let done = results.iter().filter(|r| r.is_ok()).count();
+        return Err(InferError::Interrupted { done, total: n });
+    }
     let mut files = Vec::with_capacity(results.len());
     for r in results {
         files.push(r?);

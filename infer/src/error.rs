@@ -52,16 +52,18 @@ pub enum InferError {
     /// A rain rate outside the validity range of the table's rate → MOR
     /// conversion (and `clamp` not set).
     #[error(
-        "{table}: weathers.rain.mor_from_rain_rate: rain rate {rate} mm/h is outside the conversion's validity [{min}, {max}] mm/h ({reason}); pass a rate inside it, give a MOR instead, or ask for a clamp"
+        "{table}: weathers.rain.mor_from_rain_rate: rain rate {rate} mm/h is outside the conversion's validity [{min}, {max}] mm/h ({reason}); pass a rate inside it, give a MOR instead, or clamp it into the range (`--clamp` in murk apply, `clamp_rain_rate` in ApplyParams)"
     )]
     RainRateOutOfRange {
         /// Which table.
         table: String,
         /// The rate asked for, mm/h.
         rate: f64,
-        /// Lowest valid rate, mm/h.
-        min: f64,
-        /// Highest valid rate, mm/h (`inf` when unbounded).
+        /// Lowest valid rate, mm/h, as printed (rounded up to 4 significant
+        /// digits, so that the rate printed is inside the range).
+        min: String,
+        /// Highest valid rate, mm/h (`inf` when unbounded), as printed
+        /// (rounded down to 4 significant digits).
         max: String,
         /// Where the range comes from.
         reason: String,
@@ -98,6 +100,17 @@ pub enum InferError {
     /// Reading or writing a point-cloud file failed.
     #[error(transparent)]
     Io(#[from] murk_io::IoError),
+
+    /// A batch stopped on request (Ctrl-C) before every file was done.
+    #[error(
+        "interrupted: {done} of {total} files written (each complete); the others were not started"
+    )]
+    Interrupted {
+        /// Files written and in place.
+        done: usize,
+        /// Files of the batch.
+        total: usize,
+    },
 
     /// A file-system operation on an input or output failed.
     #[error("{path}: {action}: {source}")]

@@ -8,7 +8,8 @@
 use std::collections::BTreeMap;
 
 use murk_types::{
-    CoefficientTable, CovariateValue, LidarSpec, NoiseLaw, WeatherClass, WeatherCoefficients,
+    CoefficientTable, CovariateValue, ExtensionFunction, LidarSpec, NoiseLaw, WeatherClass,
+    WeatherCoefficients,
 };
 
 use crate::applier::{Applier, BandRule, NearLaw, RainUse, SoftEdge};
@@ -371,7 +372,10 @@ impl ApplyParams {
             && (mor < lo || mor > hi)
         {
             warnings.push(format!(
-                "MOR {mor} m is outside the {lo}–{hi} m of the {w} recordings the table was fitted on: the linear vanishing model extrapolates"
+                "MOR {} m is outside the {}–{} m of the {w} recordings the table was fitted on: the linear vanishing model extrapolates",
+                short_number(mor, Toward::Nearest),
+                short_number(lo, Toward::Nearest),
+                short_number(hi, Toward::Nearest)
             ));
         }
 
@@ -491,12 +495,57 @@ impl ApplyParams {
             if e.is_point_level() || e.covariate == "mor" {
                 continue;
             }
+            // A value the term cannot place would silently fall back to
+            // the default: refuse it, naming what the term knows.
+            match (&e.function, self.covariates.get(&e.covariate)) {
+                (ExtensionFunction::Categories { values }, Some(CovariateValue::Text(t)))
+                    if !values.contains_key(t) =>
+                {
+                    return Err(InferError::InvalidParam {
+                        name: "covariate",
+                        value: format!("{}={t}", e.covariate),
+                        reason: format!(
+                            "{t:?} is not a category of the table's extension term along {:?} \
+                             (weathers.{w}.extensions[{i}]); its categories are {}",
+                            e.covariate,
+                            values
+                                .keys()
+                                .map(|k| format!("{k:?}"))
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        ),
+                    });
+                }
+                (ExtensionFunction::Bins { .. }, Some(CovariateValue::Text(t))) => {
+                    return Err(InferError::InvalidParam {
+                        name: "covariate",
+                        value: format!("{}={t}", e.covariate),
+                        reason: format!(
+                            "the table's extension term along {:?} (weathers.{w}.extensions[{i}]) \
+                             is a function of a number; {t:?} is not one",
+                            e.covariate
+                        ),
+                    });
+                }
+                _ => {}
+            }
             if !self.covariates.contains_key(&e.covariate) {
                 warnings.push(format!(
                     "extension term on {} along {:?}: no value given (--covariate), using its fitted default {}",
                     e.observable.name(),
                     e.covariate,
                     e.default
+                ));
+            }
+        }
+        for name in self
+            .covariates
+            .keys()
+            .filter(|_| self.extensions && !identity)
+        {
+            if !extensions.iter().any(|e| &e.covariate == name) {
+                warnings.push(format!(
+                    "covariate {name:?} given, but no extension term of weathers.{w} uses it: ignored"
                 ));
             }
         }
@@ -528,6 +577,55 @@ impl ApplyParams {
             extensions,
             scan_covariates: self.covariates.clone(),
         })
+    }
+}
+
+/// Which way [`short_number`] rounds.
+#[derive(Clone, Copy, PartialEq)]
+enum Toward {
+    /// To the nearest.
+    Nearest,
+    /// Up: for a lower bound, so a rate copied from the message is inside.
+    Up,
+    /// Down: for an upper bound.
+    Down,
+}
+
+/// A rate or a MOR for a message: 4 significant digits, without the tail
+/// of a binary fraction (`0.9450000000000001` prints as `0.945`, or `0.9451`
+/// as a lower bound: 0.945 itself is below it).
+fn short_number(v: f64, toward: Toward) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return format!("{v}");
+    }
+    // 4 significant digits through the shortest decimal, so the printed
+    // number has no tail of its own.
+    let four = |x: f64| format!("{x:.3e}").parse::<f64>().unwrap_or(x);
+    let step = 10f64.powi(v.abs().log10().floor() as i32 - 3);
+    let mut r = four(v);
+    if toward == Toward::Up && r < v {
+        r = four(r + step);
+    } else if toward == Toward::Down && r > v {
+        r = four(r - step);
+    }
+    format!("{r}")
+}
+
+#[cfg(test)]
+mod short_number_tests {
+    use super::{Toward, short_number};
+
+    #[test]
+    fn rates_print_with_four_significant_digits_on_the_inside_of_the_range() {
+        assert_eq!(short_number(0.9450000000000001, Toward::Up), "0.9451");
+        assert_eq!(short_number(0.9450000000000001, Toward::Nearest), "0.945");
+        assert_eq!(short_number(0.9450000000000001, Toward::Down), "0.945");
+        assert_eq!(short_number(0.945, Toward::Up), "0.945");
+        assert_eq!(short_number(99.99999999999999, Toward::Down), "99.99");
+        assert_eq!(short_number(100.0, Toward::Down), "100");
+        assert_eq!(short_number(191.57, Toward::Down), "191.5");
+        assert_eq!(short_number(191.57, Toward::Up), "191.6");
+        assert_eq!(short_number(0.0, Toward::Up), "0");
     }
 }
 
@@ -596,8 +694,13 @@ fn rain_to_mor(
         format!("{why}; the table records no fitted rate range")
     };
     let inside = rate >= lo && if hi_exclusive { rate < hi } else { rate <= hi };
+    let lo_text = short_number(lo, Toward::Up);
     let max_text = if hi.is_finite() {
-        format!("{hi}{}", if hi_exclusive { " (exclusive)" } else { "" })
+        format!(
+            "{}{}",
+            short_number(hi, Toward::Down),
+            if hi_exclusive { " (exclusive)" } else { "" }
+        )
     } else {
         "inf".into()
     };
@@ -608,7 +711,7 @@ fn rain_to_mor(
             return Err(InferError::RainRateOutOfRange {
                 table: label.to_string(),
                 rate,
-                min: lo,
+                min: lo_text.clone(),
                 max: max_text,
                 reason: why,
             });
@@ -617,7 +720,7 @@ fn rain_to_mor(
             return Err(InferError::RainRateOutOfRange {
                 table: label.to_string(),
                 rate,
-                min: lo,
+                min: lo_text.clone(),
                 max: max_text,
                 reason: format!(
                     "{why}; cannot clamp to a rate whose MOR is 0 (everything would vanish)"
@@ -626,7 +729,8 @@ fn rain_to_mor(
         }
         used = rate.clamp(lo, hi);
         warning = Some(format!(
-            "rain rate {rate} mm/h clamped to {used} mm/h, the nearest rate inside the conversion's validity [{lo}, {max_text}] mm/h"
+            "rain rate {rate} mm/h clamped to {} mm/h, the nearest rate inside the conversion's validity [{lo_text}, {max_text}] mm/h",
+            short_number(used, Toward::Nearest)
         ));
     }
     let mor = conv.mor(used);
@@ -634,9 +738,12 @@ fn rain_to_mor(
         return Err(InferError::RainRateOutOfRange {
             table: label.to_string(),
             rate,
-            min: lo,
+            min: lo_text,
             max: max_text,
-            reason: format!("the conversion gives MOR {mor} m at {used} mm/h, which is not > 0"),
+            reason: format!(
+                "the conversion gives MOR {mor:.4} m at {} mm/h, which is not > 0",
+                short_number(used, Toward::Nearest)
+            ),
         });
     }
     Ok((

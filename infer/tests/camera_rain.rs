@@ -429,13 +429,7 @@ fn terminal_velocity_grows_with_size() {
 }
 
 fn real(name: &str) -> Option<PathBuf> {
-    let p = Path::new("/work/shared/data/real").join(name);
-    if p.exists() {
-        Some(p)
-    } else {
-        println!("skipping: {} is absent", p.display());
-        None
-    }
+    murk_types::real_data::real_data_file(env!("CARGO_MANIFEST_DIR"), name)
 }
 
 #[test]

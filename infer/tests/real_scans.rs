@@ -1,6 +1,6 @@
-//! Real scans from `/work/shared/data/real/` (KITTI `.bin`, nuScenes
-//! `.pcd.bin`), when present; each test prints a line and passes when the
-//! file is absent.
+//! Real scans from `../shared/data/real/` beside the checkout (KITTI `.bin`,
+//! nuScenes `.pcd.bin`), when present; each test prints a line and passes
+//! when the file is absent (fails with `MURK_REQUIRE_REAL_DATA=1`).
 
 // Point clouds are columns (SoA): one index addresses several of them.
 #![allow(clippy::needless_range_loop)]
@@ -14,14 +14,8 @@ use murk_infer::{ApplyParams, Severity};
 use murk_io::{ReadOptions, read_cloud};
 use murk_types::{PointCloud, WeatherClass};
 
-const REAL: &str = "/work/shared/data/real";
-
 fn load(name: &str) -> Option<PointCloud> {
-    let p = Path::new(REAL).join(name);
-    if !p.is_file() {
-        println!("skipping: {} is absent", p.display());
-        return None;
-    }
+    let p = murk_types::real_data::real_data_file(env!("CARGO_MANIFEST_DIR"), name)?;
     Some(read_cloud(&p, &ReadOptions::default()).unwrap())
 }
 

@@ -19,6 +19,8 @@ compile_error!(
      (`--no-default-features --features native`)"
 );
 
+#[macro_use]
+mod out;
 mod cmd;
 
 /// mimalloc instead of the system allocator: batch jobs allocate and free
@@ -74,7 +76,30 @@ fn main() {
         Command::Camera(a) => cmd::camera::run(a),
     };
     if let Err(e) = result {
-        eprintln!("murk: error: {e:#}");
+        if let Some(stopped) = e.downcast_ref::<cmd::Interrupted>() {
+            errln!("murk: {stopped}");
+            std::process::exit(130);
+        }
+        errln!("murk: error: {}", message(&e));
         std::process::exit(1);
     }
+}
+
+/// The error and its causes, joined by `: ` like anyhow's `{:#}`, but a
+/// cause whose text the message already holds is left out: the library
+/// errors put their source in their own text ("…: No such file or directory
+/// (os error 2)"), and printing the chain again repeated it.
+fn message(e: &anyhow::Error) -> String {
+    let mut text = String::new();
+    for cause in e.chain() {
+        let c = cause.to_string();
+        if c.is_empty() || text.contains(&c) {
+            continue;
+        }
+        if !text.is_empty() {
+            text.push_str(": ");
+        }
+        text.push_str(&c);
+    }
+    text
 }

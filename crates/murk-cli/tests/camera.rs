@@ -264,11 +264,12 @@ fn camera_refuses_bad_inputs_with_the_reason() {
 /// is not the input. Skips, saying so, when the shared data is absent.
 #[test]
 fn camera_keeps_the_size_of_a_real_kitti_frame() {
-    let png = Path::new("/work/shared/data/real/kitti-000008.png");
-    if !png.exists() {
-        println!("skipping: {} is absent", png.display());
+    let Some(png) =
+        murk_types::real_data::real_data_file(env!("CARGO_MANIFEST_DIR"), "kitti-000008.png")
+    else {
         return;
-    }
+    };
+    let png = png.as_path();
     let dir = tempfile::tempdir().unwrap();
     let generator = gan_data("tiny_generator.onnx");
     let input = pixels(png);

@@ -210,11 +210,12 @@ fn a_bad_input_stops_with_its_name() {
 
 #[test]
 fn a_pcap_becomes_one_file_per_frame() {
-    let pcap = PathBuf::from("/work/shared/data/real/vlp16-test-90deg-1-50-frames.pcap");
-    if !pcap.exists() {
-        println!("skipping: {} is not present", pcap.display());
+    let Some(pcap) = murk_types::real_data::real_data_file(
+        env!("CARGO_MANIFEST_DIR"),
+        "vlp16-test-90deg-1-50-frames.pcap",
+    ) else {
         return;
-    }
+    };
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("frames");
     let stdout = ok(&["convert", s(&pcap), "--out", s(&out), "--format", "pcd"]);
@@ -242,7 +243,10 @@ fn a_pcap_becomes_one_file_per_frame() {
         .sum();
     assert_eq!(total, all.len());
     assert!(
-        stdout.contains(&format!("({} frames)", names.len())),
+        stdout.contains(&format!(
+            "split into one file per frame) into {} pcd files",
+            names.len()
+        )),
         "{stdout}"
     );
 }

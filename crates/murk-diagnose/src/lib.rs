@@ -524,7 +524,17 @@ impl DiagnoseValidParams {
 
         // Extension.
         let (extended, gain, extended_table) = match top {
-            None => (None, None, None),
+            // Nothing to extend along: the table to publish is the
+            // baseline itself, so that what follows a diagnosis (`murk apply
+            // --coefficients <report>.extended.json`) works either way.
+            None => {
+                let all: Vec<usize> = (0..n).collect();
+                let full = match &p.coefficients {
+                    Some(t) => t.clone(),
+                    None => self.fit_on(&loaded, &all, &fit_params, "all recordings")?,
+                };
+                (None, None, Some(full))
+            }
             Some(i) => {
                 let t = &tests[i];
                 let mut ext_evals = Vec::with_capacity(n);

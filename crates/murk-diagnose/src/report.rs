@@ -127,8 +127,10 @@ impl Report {
 pub struct Diagnosis {
     /// The report.
     pub report: Report,
-    /// The baseline fitted on every recording plus the extension term, when
-    /// there is one: a table `murk apply` uses.
+    /// The table `murk apply` uses: the baseline fitted on every recording
+    /// (or the table given) plus the extension term when there is a
+    /// significant finding; without one, the baseline itself (no term).
+    /// Always present after a run; `None` only in a hand-built value.
     pub extended_table: Option<CoefficientTable>,
     /// Data of the figures.
     pub figures: FigureData,

@@ -248,7 +248,13 @@ fn count_along_road_state_column_in_snow() {
 fn nothing_hidden_in_fog_finds_nothing() {
     let d = diagnose(WeatherClass::Fog, vec![], 21);
     assert!(d.report.top().is_none(), "{:?}", d.report.top());
-    assert!(d.report.extended.is_none() && d.extended_table.is_none());
+    assert!(d.report.extended.is_none());
+    // The table to use is then the baseline, with no extension term.
+    let t = d
+        .extended_table
+        .as_ref()
+        .expect("the baseline as the table to use");
+    assert!(t.weathers.values().all(|w| w.extensions.is_empty()));
     assert!(
         d.report.findings.len() > 40,
         "every observable × covariate is tested"

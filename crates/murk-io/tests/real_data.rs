@@ -1,22 +1,15 @@
-//! The real sample files in `/work/shared/data/real/`, when present.
-//! Each test prints a line and passes when its file is absent.
+//! The real sample files in `../shared/data/real/` beside the checkout,
+//! when present. Each test prints a line and passes when its file is absent
+//! (fails with `MURK_REQUIRE_REAL_DATA=1`: see `murk_types::real_data`).
 
 use std::path::Path;
 
 use murk_io::{ReadOptions, read_cloud, read_frames};
 use murk_types::IntensityScale;
 
-const REAL: &str = "/work/shared/data/real";
-
 /// The path of a sample file, or `None` (with a note) when it is absent.
 fn sample(name: &str) -> Option<std::path::PathBuf> {
-    let p = Path::new(REAL).join(name);
-    if p.exists() {
-        Some(p)
-    } else {
-        println!("skipping: {} is not present", p.display());
-        None
-    }
+    murk_types::real_data::real_data_file(env!("CARGO_MANIFEST_DIR"), name)
 }
 
 #[test]

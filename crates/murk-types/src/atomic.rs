@@ -132,7 +132,8 @@ fn stage(
         _ => Path::new("."),
     };
     let mut builder = tempfile::Builder::new();
-    builder.prefix(".murk-").suffix(".tmp");
+    let prefix = format!("{TEMP_PREFIX}{}-", std::process::id());
+    builder.prefix(&prefix).suffix(TEMP_SUFFIX);
     #[cfg(unix)]
     {
         use std::os::unix::fs::PermissionsExt as _;
@@ -146,6 +147,85 @@ fn stage(
         tmp,
         path: path.to_path_buf(),
     })
+}
+
+/// Temporary files are named `.murk-<pid>-<random>.tmp`: the writing
+/// process's id lets a later run tell a temporary file left by a killed
+/// run (its process has ended) from one a running murk is still writing.
+const TEMP_PREFIX: &str = ".murk-";
+const TEMP_SUFFIX: &str = ".tmp";
+
+/// The id of the process that created `name`, when `name` is a murk
+/// temporary file (`.murk-<pid>-<random>.tmp`).
+fn temp_owner(name: &str) -> Option<u32> {
+    let middle = name.strip_prefix(TEMP_PREFIX)?.strip_suffix(TEMP_SUFFIX)?;
+    let (pid, random) = middle.split_once('-')?;
+    if random.is_empty() || !random.bytes().all(|b| b.is_ascii_alphanumeric()) {
+        return None;
+    }
+    if pid.is_empty() || !pid.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    pid.parse().ok()
+}
+
+/// Whether process `pid` has certainly ended. On Linux a live process has
+/// `/proc/<pid>`; where there is no `/proc` this cannot tell and says
+/// `false`, so nothing is ever removed on a guess. (A recycled id looks
+/// alive: the file is then kept, the safe side.)
+pub fn process_ended(pid: u32) -> bool {
+    let proc = Path::new("/proc");
+    pid != std::process::id() && proc.join("self").exists() && !proc.join(pid.to_string()).exists()
+}
+
+/// Removes, from `dir` only (not its subfolders), the temporary files that
+/// [`stage_atomic`] and friends leave when a murk process is killed before
+/// it could commit or clean up: files named `.murk-<pid>-<random>.tmp`
+/// whose process has ended ([`process_ended`]). Nothing else is touched:
+/// not other names, not folders, not links, not the files of a murk that
+/// is still running. Returns the files removed; a missing `dir` has none.
+///
+/// ```
+/// let dir = tempfile::tempdir()?;
+/// // Left by a killed run (a process id no system has).
+/// let stale = dir.path().join(".murk-4294967295-AbC123.tmp");
+/// std::fs::write(&stale, b"half a scan")?;
+/// let mine = dir.path().join("notes.tmp");
+/// std::fs::write(&mine, b"not murk's")?;
+/// let removed = murk_types::remove_stale_temporaries(dir.path())?;
+/// # if std::path::Path::new("/proc/self").exists() {
+/// assert_eq!(removed, vec![stale.clone()]);
+/// assert!(!stale.exists());
+/// # }
+/// assert!(mine.exists());
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+pub fn remove_stale_temporaries(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
+    let entries = match std::fs::read_dir(dir) {
+        Ok(e) => e,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+        Err(e) => return Err(e),
+    };
+    let mut removed = Vec::new();
+    for e in entries {
+        let e = e?;
+        let name = e.file_name();
+        let Some(pid) = name.to_str().and_then(temp_owner) else {
+            continue;
+        };
+        // `file_type` does not follow links: only plain files are removed.
+        if !e.file_type()?.is_file() || !process_ended(pid) {
+            continue;
+        }
+        match std::fs::remove_file(e.path()) {
+            Ok(()) => removed.push(e.path()),
+            // Another run cleaned it first.
+            Err(err) if err.kind() == std::io::ErrorKind::NotFound => {}
+            Err(err) => return Err(err),
+        }
+    }
+    removed.sort();
+    Ok(removed)
 }
 
 /// The error of a failed `action`.
@@ -193,6 +273,28 @@ mod tests {
         staged.commit().unwrap();
         assert_eq!(names(dir.path()), vec!["out.csv".to_string()]);
         assert_eq!(std::fs::read(&path).unwrap(), b"streamed");
+    }
+
+    #[test]
+    fn temporary_names_carry_the_owner_and_nothing_else_matches() {
+        let dir = tempfile::tempdir().unwrap();
+        let staged = stage_atomic(&dir.path().join("a.bin"), b"x").unwrap();
+        let name = names(dir.path()).remove(0);
+        assert_eq!(temp_owner(&name), Some(std::process::id()), "{name}");
+        // A live owner (this process): kept.
+        assert!(remove_stale_temporaries(dir.path()).unwrap().is_empty());
+        drop(staged);
+        for other in [
+            ".murk-.tmp",
+            ".murk-12.tmp",
+            ".murk-x1-abc.tmp",
+            ".murk-1-abc.tmp.bak",
+            "murk-1-abc.tmp",
+            ".murk-1-a/b.tmp",
+        ] {
+            assert_eq!(temp_owner(other), None, "{other}");
+        }
+        assert_eq!(temp_owner(".murk-77-Zz9.tmp"), Some(77));
     }
 
     #[test]

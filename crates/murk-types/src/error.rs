@@ -12,6 +12,16 @@ pub enum TypesError {
     /// A weather class name that is not clear, fog, rain or snow.
     #[error("unknown weather class {0:?}: expected clear, fog, rain or snow")]
     UnknownWeather(String),
+    /// A folder of inputs that cannot be listed or resolved.
+    #[error("{}: cannot {action} folder: {source}", .path.display())]
+    Folder {
+        /// The folder.
+        path: std::path::PathBuf,
+        /// What failed: "list" or "resolve".
+        action: &'static str,
+        /// The system's error.
+        source: std::io::Error,
+    },
     /// A file extension that no reader handles.
     #[error(
         "{path}: unknown point-cloud format (extension {ext:?}); expected .pcd, .bin, .pcd.bin, .csv, .parquet or .pcap"

@@ -43,11 +43,14 @@ mod extension;
 mod format;
 mod intensity;
 mod lidar;
+pub mod real_data;
 mod table;
+mod walk;
 mod weather;
 
 pub use atomic::{
-    AtomicWriteError, StagedFile, stage_atomic, stage_atomic_with, write_atomic, write_atomic_with,
+    AtomicWriteError, StagedFile, process_ended, remove_stale_temporaries, stage_atomic,
+    stage_atomic_with, write_atomic, write_atomic_with,
 };
 pub use bins::nice_step;
 pub use cloud::PointCloud;
@@ -64,4 +67,5 @@ pub use table::{
     MorBin, NoiseLaw, Provenance, RadarCoefficients, RainConversion, SlopeBand, SurvivalFit,
     SweepBand, TABLE_FORMAT, TableLidar, Uncertainty, WeatherCoefficients,
 };
+pub use walk::{LeftOut, Walk, WalkedFile, walk_folder};
 pub use weather::WeatherClass;

@@ -481,7 +481,12 @@ impl CoefficientTable {
             serde_json::from_str(text).map_err(|e| TypesError::Table {
                 path: path.to_string(),
                 location: format!("line {} column {}", e.line(), e.column()),
-                reason: e.to_string(),
+                // serde_json ends its text with the same position: once is enough.
+                reason: {
+                    let text = e.to_string();
+                    let at = format!(" at line {} column {}", e.line(), e.column());
+                    text.strip_suffix(&at).unwrap_or(&text).to_string()
+                },
             })?;
         table.validate().map_err(|e| match e {
             TypesError::Table {

@@ -851,7 +851,7 @@ fn file_errors_name_the_file() {
 
 // ---------------------------------------------------------------- real data
 
-const REAL: &str = "/work/shared/data/real/vlp16-test-90deg-1-50-frames.pcap";
+const REAL: &str = "vlp16-test-90deg-1-50-frames.pcap";
 
 /// Points per full frame the capturing tool's own test expects.
 const EXPECTED_FULL_FRAME_POINTS: f64 = 13_860.0;
@@ -860,11 +860,10 @@ const FULL_FRAME_TOLERANCE: f64 = 0.01;
 
 #[test]
 fn real_vlp16_capture_decodes_to_fifty_full_frames() {
-    let path = Path::new(REAL);
-    if !path.exists() {
-        println!("skipping: real capture {REAL} is absent");
+    let Some(path) = murk_types::real_data::real_data_file(env!("CARGO_MANIFEST_DIR"), REAL) else {
         return;
-    }
+    };
+    let path = path.as_path();
     let c = read_pcap_file(path, &PcapOptions::default()).expect("reads without flags");
     let s = &c.stats;
     assert_eq!(s.packets_data, 1902);

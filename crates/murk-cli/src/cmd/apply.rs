@@ -127,6 +127,10 @@ fn parse_slope(s: &str) -> Result<SlopeSource, String> {
 
 /// Runs `murk apply`.
 pub fn run(a: Args) -> anyhow::Result<()> {
+    super::check_folder_target("--out", &a.out)?;
+    if let Some(p) = &a.summary {
+        super::check_file_target("--summary", p)?;
+    }
     let severity = match (a.mor, a.rain_rate) {
         (Some(m), None) => Severity::Mor(m),
         (None, Some(r)) => Severity::RainRate(r),
@@ -168,7 +172,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     }
     let applier = params.build_from_file(&a.coefficients)?;
     for w in applier.warnings() {
-        eprintln!("murk: warning: {w}");
+        errln!("murk: warning: {w}");
     }
 
     let opts = BatchOptions {
@@ -181,28 +185,57 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         pcd_data: a.pcd_data,
     };
     let plan = batch::plan(&a.inputs, &a.out, &opts)?;
+    for s in &plan.skipped {
+        errln!("murk: skipped {}: {}", s.path.display(), s.reason);
+    }
     if plan.jobs.is_empty() {
+        let n = plan.skipped.len();
         bail!(
-            "no point-cloud file among the inputs ({} other files listed below were left out)",
-            plan.skipped.len()
+            "no point-cloud file among the inputs ({n} other {} listed above {} left out)",
+            if n == 1 { "entry" } else { "entries" },
+            if n == 1 { "was" } else { "were" }
         );
     }
-    for s in &plan.skipped {
-        eprintln!("murk: skipped {}: {}", s.path.display(), s.reason);
-    }
+    // Temporary files of killed runs, in the folders this run writes to.
+    super::clean_stale(
+        std::iter::once(a.out.clone()).chain(
+            plan.jobs
+                .iter()
+                .filter_map(|j| j.output.parent().map(std::path::Path::to_path_buf)),
+        ),
+    );
 
+    let stop = super::interrupt_flag()?;
     let bar = super::progress_bar(plan.jobs.len(), "files", false);
-    let report = batch::run(&applier, &plan, &opts, &|f| {
-        bar.set_message(f.summary.scan.clone());
-        bar.inc(1);
-    })?;
+    let report = batch::run_until(
+        &applier,
+        &plan,
+        &opts,
+        &|f| {
+            bar.set_message(f.summary.scan.clone());
+            bar.inc(1);
+        },
+        &stop,
+    );
     bar.finish_and_clear();
+    let report = match report {
+        Err(murk_infer::InferError::Interrupted { done, total }) => {
+            return Err(super::Interrupted(format!(
+                "interrupted: {done} of {total} file{} written to {} (each complete); \
+                 the others were not started and no temporary file is left",
+                if total == 1 { "" } else { "s" },
+                a.out.display()
+            ))
+            .into());
+        }
+        r => r?,
+    };
 
     if let Some(path) = &a.summary {
         report.write(path)?;
     }
     for w in report.totals.warnings.iter().skip(applier.warnings().len()) {
-        eprintln!("murk: warning: {w}");
+        errln!("murk: warning: {w}");
     }
     print_summary(&report.totals, &report.model, report.files.len(), &a.out);
     Ok(())
@@ -226,21 +259,22 @@ fn print_summary(
     .filter(|(on, _)| *on)
     .map(|(_, n)| *n)
     .collect();
-    println!(
-        "applied {} at MOR {mor} ({} vanishing{}{}) to {files} files → {}",
+    outln!(
+        "applied {} at MOR {mor} ({} vanishing{}{}) to {files} file{} → {}",
         m.weather,
         m.vanishing,
         if effects.is_empty() { "" } else { ", " },
         effects.join(", "),
+        if files == 1 { "" } else { "s" },
         out.display()
     );
     if m.identity {
-        println!(
+        outln!(
             "  clear weather (MOR ≥ {} m): outputs equal inputs",
             m.clear_mor_threshold_m
         );
     }
-    println!(
+    outln!(
         "  points in {}, out {}, vanished {} ({:.2} % kept)",
         t.points_in,
         t.points_out,
@@ -254,14 +288,16 @@ fn print_summary(
         let d = r
             .vanishing_distance_m
             .map_or("∞".to_string(), |v| format!("{v:.2} m"));
-        println!(
+        outln!(
             "  reflectivity [{}, {hi}): {} in, {} vanished (beyond {d})",
-            b.reflectivity_min, b.points_in, b.vanished
+            b.reflectivity_min,
+            b.points_in,
+            b.vanished
         );
     }
     for (name, c) in [("ghost", &t.ghost), ("ring", &t.ring)] {
         if let Some(c) = c {
-            println!(
+            outln!(
                 "  {name}: {} drawn, {} replaced, {} added, {} occluded{}",
                 c.drawn,
                 c.replaced,
@@ -276,9 +312,9 @@ fn print_summary(
         }
     }
     if t.range_noise_points > 0 {
-        println!("  range noise on {} points", t.range_noise_points);
+        outln!("  range noise on {} points", t.range_noise_points);
     }
     if t.attenuated_points > 0 {
-        println!("  intensity attenuated on {} points", t.attenuated_points);
+        outln!("  intensity attenuated on {} points", t.attenuated_points);
     }
 }

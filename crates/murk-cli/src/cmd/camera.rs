@@ -177,7 +177,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     bar.finish_and_clear();
     let secs = started.elapsed().as_secs_f64();
-    println!(
+    outln!(
         "{n} {} through {} ({}) → {} in {secs:.2} s ({:.2} images/s, {:.1} Mpixel): {:.2} s in the network, \
          {:.1} % of the translation time in pre/post-processing",
         if n == 1 { "image" } else { "images" },

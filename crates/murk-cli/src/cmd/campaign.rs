@@ -49,14 +49,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 }
 
 fn summary(args: SummaryArgs) -> anyhow::Result<()> {
+    if let Some(dir) = &args.figures {
+        super::check_folder_target("--figures", dir)?;
+    }
     let campaign = Campaign::open(&args.dir)
         .with_context(|| format!("cannot open campaign {}", args.dir.display()))?;
     let selection = campaign.select();
     let summary = selection.summary();
     if args.json {
-        println!("{}", serde_json::to_string_pretty(summary)?);
+        outln!("{}", serde_json::to_string_pretty(summary)?);
     } else {
-        print!("{summary}");
+        out!("{summary}");
     }
     if let Some(dir) = &args.figures {
         std::fs::create_dir_all(dir)
@@ -78,7 +81,7 @@ fn summary(args: SummaryArgs) -> anyhow::Result<()> {
         };
         let written = write_mor_histograms(&series, &opts, dir)?;
         for path in written {
-            eprintln!("wrote {}", path.display());
+            errln!("wrote {}", path.display());
         }
     }
     Ok(())

@@ -6,9 +6,12 @@
 //!              [--intensity-scale NAME] [--input-intensity-scale NAME]
 //! ```
 //!
-//! - An INPUT is a file or a folder; folders are walked recursively and every
-//!   file with a point-cloud extension (`.pcd .bin .pcd.bin .csv .parquet
-//!   .pcap`) is taken, in sorted order. A file given by name must have one.
+//! - An INPUT is a file or a folder; folders are walked recursively
+//!   ([`murk_types::walk_folder`]) and every file with a point-cloud
+//!   extension (`.pcd .bin .pcd.bin .csv .parquet .pcap`) is taken, in
+//!   sorted order; hidden entries and symbolic links back into folders
+//!   already walked are left out and listed on stderr. A file given by name
+//!   must have one.
 //! - Output names keep the input's stem: `DIR/<stem>.<ext>`; files found in
 //!   a folder keep their path relative to that folder
 //!   (`DIR/<sub>/<stem>.<ext>`), so equal stems in different subfolders do
@@ -94,35 +97,28 @@ fn stem_of(path: &Path) -> anyhow::Result<String> {
     Ok(name[..name.len() - ext_len].to_string())
 }
 
-/// Every point-cloud file under `dir`, sorted, as paths relative to `dir`.
-fn walk(dir: &Path, rel: &Path, out: &mut Vec<PathBuf>) -> anyhow::Result<()> {
-    let here = dir.join(rel);
-    let mut entries: Vec<_> = std::fs::read_dir(&here)
-        .with_context(|| format!("{}: cannot list folder", here.display()))?
-        .map(|e| e.map(|e| e.path()))
-        .collect::<Result<_, _>>()
-        .with_context(|| format!("{}: cannot list folder", here.display()))?;
-    entries.sort();
-    for p in entries {
-        let name = p.file_name().map(PathBuf::from).unwrap_or_default();
-        if p.is_dir() {
-            walk(dir, &rel.join(&name), out)?;
-        } else if PointFormat::from_path(&p).is_ok() {
-            out.push(rel.join(&name));
-        }
-    }
-    Ok(())
-}
-
 /// The inputs to convert and their output stems, in order.
-fn plan(inputs: &[PathBuf]) -> anyhow::Result<Vec<Job>> {
+fn plan(inputs: &[PathBuf], out: &Path) -> anyhow::Result<Vec<Job>> {
     let mut jobs = Vec::new();
     let mut seen = BTreeSet::new();
+    // An output folder inside an input folder is not an input.
+    let exclude: Vec<PathBuf> = std::fs::canonicalize(out).into_iter().collect();
     for input in inputs {
         let mut found = Vec::new();
         let base: &Path;
         if input.is_dir() {
-            walk(input, Path::new(""), &mut found)?;
+            // The one folder walk of murk (shared with `murk apply`):
+            // hidden entries and symbolic-link loops are left out, and said.
+            let walk = murk_types::walk_folder(input, &exclude)?;
+            for l in &walk.left_out {
+                errln!("murk: skipped {}: {}", l.path.display(), l.reason);
+            }
+            found.extend(
+                walk.files
+                    .into_iter()
+                    .filter(|f| PointFormat::from_path(&f.path).is_ok())
+                    .map(|f| PathBuf::from(f.key)),
+            );
             base = input;
         } else if input.is_file() {
             PointFormat::from_path(input)?;
@@ -150,9 +146,14 @@ fn plan(inputs: &[PathBuf]) -> anyhow::Result<Vec<Job>> {
     Ok(jobs)
 }
 
+/// `""` for one, `"s"` otherwise.
+fn plural(n: usize) -> &'static str {
+    if n == 1 { "" } else { "s" }
+}
+
 /// Runs `murk convert`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let jobs = plan(&args.inputs)?;
+    let jobs = plan(&args.inputs, &args.out)?;
     if jobs.is_empty() {
         bail!("no point-cloud file found in the inputs");
     }
@@ -202,8 +203,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         format: args.format,
         pcd_data: args.pcd_data,
     };
-    let (mut files, mut points) = (0usize, 0usize);
+    let stop = super::interrupt_flag()?;
+    super::clean_stale(
+        std::iter::once(args.out.clone()).chain(jobs.iter().map(|j| {
+            if j.is_pcap {
+                args.out.join(&j.stem)
+            } else {
+                let out = args.out.join(with_ext(&j.stem, ext));
+                out.parent()
+                    .map_or_else(|| args.out.clone(), Path::to_path_buf)
+            }
+        })),
+    );
+    let bar = super::progress_bar(jobs.len(), "inputs", false);
+    let (mut done, mut files, mut points) = (0usize, 0usize, 0usize);
     for j in &jobs {
+        bar.set_message(j.input.display().to_string());
         let frames = read_frames(&j.input, &read_opts)?;
         let outputs: Vec<PathBuf> = if j.is_pcap {
             let dir = args.out.join(&j.stem);
@@ -220,43 +235,52 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             }
             vec![out]
         };
-        let mut n = 0;
         for (mut cloud, out) in frames.into_iter().zip(&outputs) {
+            if stop.load(std::sync::atomic::Ordering::Relaxed) {
+                bar.finish_and_clear();
+                return Err(super::Interrupted(format!(
+                    "interrupted: {done} of {} input{} converted ({files} {ext} file{}, each \
+                     complete) in {}; the rest was not written",
+                    jobs.len(),
+                    plural(jobs.len()),
+                    plural(files),
+                    args.out.display()
+                ))
+                .into());
+            }
             refuse_input(out)?;
             if let Some(scale) = args.intensity_scale {
                 cloud.to_scale(scale);
             }
+            // Atomic: a Ctrl-C during the write waits for it to end.
             write_cloud_with(out, &cloud, &write_opts)?;
-            n += cloud.len();
+            points += cloud.len();
+            files += 1;
         }
-        println!(
-            "{} -> {} ({} point{}{})",
-            j.input.display(),
-            if j.is_pcap {
-                format!(
-                    "{} ({} frames)",
-                    args.out.join(&j.stem).display(),
-                    outputs.len()
-                )
-            } else {
-                outputs[0].display().to_string()
-            },
-            n,
-            if n == 1 { "" } else { "s" },
-            match args.intensity_scale {
-                Some(s) => format!(", intensity as {s}"),
-                None => String::new(),
-            }
-        );
-        files += outputs.len();
-        points += n;
+        done += 1;
+        bar.inc(1);
     }
-    println!(
-        "converted {} input{} into {files} {} file{} ({points} points) in {}",
+    bar.finish_and_clear();
+    // One line for the whole batch (one per file would be thousands).
+    let pcaps = jobs.iter().filter(|j| j.is_pcap).count();
+    outln!(
+        "converted {} input{}{} into {files} {ext} file{} ({points} point{}{}) in {}",
         jobs.len(),
-        if jobs.len() == 1 { "" } else { "s" },
-        ext,
-        if files == 1 { "" } else { "s" },
+        plural(jobs.len()),
+        if pcaps > 0 {
+            format!(
+                " ({pcaps} pcap capture{} split into one file per frame)",
+                plural(pcaps)
+            )
+        } else {
+            String::new()
+        },
+        plural(files),
+        plural(points),
+        match args.intensity_scale {
+            Some(s) => format!(", intensity as {s}"),
+            None => String::new(),
+        },
         args.out.display()
     );
     Ok(())

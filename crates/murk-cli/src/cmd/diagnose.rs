@@ -28,8 +28,9 @@ pub struct Args {
     /// Where to write the report (JSON, written atomically).
     #[arg(long)]
     pub out: PathBuf,
-    /// Where to write the extended coefficient table (default: beside the
-    /// report, `<out stem>.extended.json`), when there is a finding.
+    /// Where to write the coefficient table to apply (default: beside the
+    /// report, `<out stem>.extended.json`): the baseline plus the extension
+    /// term of the top finding, or the baseline alone when nothing is found.
     #[arg(long)]
     pub extended_table: Option<PathBuf>,
     /// Folder for the figures (PNG and SVG); created when missing.
@@ -60,6 +61,19 @@ pub struct Args {
 
 /// Runs `murk diagnose`.
 pub fn run(a: Args) -> anyhow::Result<()> {
+    super::check_file_target("--out", &a.out)?;
+    let extended_path = a.extended_table.clone().unwrap_or_else(|| {
+        let stem = a
+            .out
+            .file_stem()
+            .and_then(|s| s.to_str())
+            .unwrap_or("report");
+        a.out.with_file_name(format!("{stem}.extended.json"))
+    });
+    super::check_file_target("--extended-table", &extended_path)?;
+    if let Some(dir) = &a.figures {
+        super::check_folder_target("--figures", dir)?;
+    }
     let weather: WeatherClass = a
         .weather
         .parse()
@@ -87,7 +101,14 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         .local_box(local_box)
         .coefficients(table)
         .check()?;
-    let d = params.run(&campaign)?;
+    let bar = super::spinner(format!(
+        "diagnosing {weather} in {} ({} folds)",
+        a.campaign.display(),
+        a.folds
+    ));
+    let d = params.run(&campaign);
+    bar.finish_and_clear();
+    let d = d?;
     let r = &d.report;
     if let Some(parent) = a.out.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(parent)
@@ -96,7 +117,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     murk_types::write_atomic(&a.out, r.to_json().as_bytes())
         .with_context(|| format!("writing {}", a.out.display()))?;
     let m = &r.baseline.metrics;
-    println!(
+    outln!(
         "{}: {} recordings held out over {} folds; baseline survival log loss {:.4}, voxel global difference {}",
         r.weather,
         r.heldout_recordings,
@@ -107,19 +128,24 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     );
     let sig: Vec<_> = r.findings.iter().filter(|f| f.significant).collect();
     if sig.is_empty() {
-        println!(
+        outln!(
             "no significant finding (Holm-adjusted p < {} and effect ≥ threshold)",
             a.alpha
         );
     }
     for f in &sig {
-        println!(
+        outln!(
             "  {} vs {:?}: strength {:.2} (effect {:.4}, p_adj {:.4}) — {}",
-            f.observable, f.covariate, f.strength, f.effect, f.p_adjusted, f.cause
+            f.observable,
+            f.covariate,
+            f.strength,
+            f.effect,
+            f.p_adjusted,
+            f.cause
         );
     }
     if let Some(g) = &r.gain {
-        println!(
+        outln!(
             "extended along the top finding: {} {:.4} → {:.4} on held-out recordings ({:+.1} %)",
             g.metric,
             g.before,
@@ -128,23 +154,28 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         );
     }
     if let Some(t) = &d.extended_table {
-        let path = a.extended_table.clone().unwrap_or_else(|| {
-            let stem = a
-                .out
-                .file_stem()
-                .and_then(|s| s.to_str())
-                .unwrap_or("report");
-            a.out.with_file_name(format!("{stem}.extended.json"))
-        });
+        let path = &extended_path;
         let json = t.to_json().context("serialising the extended table")?;
-        murk_types::write_atomic(&path, json.as_bytes())
+        murk_types::write_atomic(path, json.as_bytes())
             .with_context(|| format!("writing {}", path.display()))?;
-        println!("extended table: {}", path.display());
+        if r.gain.is_some() {
+            outln!("extended table: {}", path.display());
+        } else {
+            outln!(
+                "table to apply: {} (the baseline{}, no extension term: nothing was found to extend along)",
+                path.display(),
+                if a.coefficients.is_some() {
+                    " given"
+                } else {
+                    " fitted on every recording"
+                }
+            );
+        }
     }
     if let Some(dir) = &a.figures {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
         crate::cmd::diagnose_figures::write(&d, dir)?;
     }
-    println!("report: {}", a.out.display());
+    outln!("report: {}", a.out.display());
     Ok(())
 }

@@ -20,7 +20,8 @@ use murk_types::NoiseLaw;
 pub struct Args {
     /// The campaign folder.
     pub campaign: PathBuf,
-    /// Where to write the coefficient table (JSON, written atomically).
+    /// Where to write the coefficient table (JSON, written atomically; its
+    /// folder is created when missing).
     #[arg(long)]
     pub out: PathBuf,
     /// Folder for the figures (PNG and SVG); created when missing.
@@ -82,6 +83,11 @@ pub struct Args {
 
 /// Runs `murk fit`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    // Before minutes of fitting, not after.
+    super::check_file_target("--out", &args.out)?;
+    if let Some(dir) = &args.figures {
+        super::check_folder_target("--figures", dir)?;
+    }
     let params = FitParams::default()
         .quantile(args.quantile)
         .mor_bin_width_m(args.mor_bin_width)
@@ -101,15 +107,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .radar_tolerance_m(args.radar_tolerance)
         .check()?;
     let campaign = Campaign::open(&args.campaign)?;
-    let fitted = params.fit(&campaign)?;
+    let bar = super::spinner(format!("fitting {}", args.campaign.display()));
+    let fitted = params.fit(&campaign);
+    bar.finish_and_clear();
+    let fitted = fitted?;
+    if let Some(parent) = args.out.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent)
+            .with_context(|| format!("{}: cannot create the folder", parent.display()))?;
+    }
     fitted.write(&args.out)?;
-    print!("{}", fitted.summary());
-    println!("table written to {}", args.out.display());
+    out!("{}", fitted.summary());
+    outln!("table written to {}", args.out.display());
     if let Some(dir) = &args.figures {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("{}: cannot create the figure folder", dir.display()))?;
         let written = figures(&fitted, dir)?;
-        println!("{} figures written to {}", written, dir.display());
+        outln!("{} figures written to {}", written, dir.display());
     }
     Ok(())
 }

@@ -83,7 +83,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             format!("{c} {n}")
         })
         .collect();
-    println!(
+    outln!(
         "wrote {} recordings ({}), {points} points, to {} in {:.1} s; truth: {}",
         truth.recordings.len(),
         per_class.join(", "),

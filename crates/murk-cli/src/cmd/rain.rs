@@ -172,8 +172,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         bar.inc(1);
     }
     bar.finish_and_clear();
-    println!(
-        "{n} images at {} mm/h{} → {} in {:.2} s: {streaks} streaks, {:.2} % of pixels covered on average",
+    outln!(
+        "{n} image{} at {} mm/h{} → {} in {:.2} s: {streaks} streaks, {:.2} % of pixels covered on average",
+        if n == 1 { "" } else { "s" },
         args.rate,
         args.generator
             .as_ref()
