@@ -601,7 +601,12 @@ fn short_number(v: f64, toward: Toward) -> String {
     // 4 significant digits through the shortest decimal, so the printed
     // number has no tail of its own.
     let four = |x: f64| format!("{x:.3e}").parse::<f64>().unwrap_or(x);
-    let step = 10f64.powi(v.abs().log10().floor() as i32 - 3);
+    // The decimal exponent of `v` itself (`log10` can round 99.999… up to 2).
+    let exp: i32 = format!("{v:e}")
+        .split_once('e')
+        .and_then(|(_, e)| e.parse().ok())
+        .unwrap_or(0);
+    let step = 10f64.powi(exp - 3);
     let mut r = four(v);
     if toward == Toward::Up && r < v {
         r = four(r + step);

@@ -7,8 +7,6 @@
 
 mod common;
 
-use std::path::Path;
-
 use common::*;
 use murk_infer::{ApplyParams, Severity};
 use murk_io::{ReadOptions, read_cloud};

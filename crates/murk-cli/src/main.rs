@@ -36,7 +36,18 @@ static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 /// Data-driven weather noise models for automotive LiDAR.
 #[derive(Parser, Debug)]
-#[command(name = "murk", version, about, long_about = None)]
+#[command(
+    name = "murk",
+    version,
+    about = "Data-driven weather noise models for automotive LiDAR: fit them from a campaign of \
+             field recordings, apply them to clear-weather point clouds, diagnose what they miss.",
+    long_about = None,
+    after_help = "A first run, from the checkout:\n  \
+        murk fit fixtures/default-campaign --out out/coefficients.json\n  \
+        murk convert fixtures/default-campaign/lidar --out scans/ --format bin\n  \
+        murk apply --coefficients out/coefficients.json --weather fog --mor 60 scans/ --out foggy/\n\n\
+        `murk <COMMAND> --help` lists every flag of a command."
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,

@@ -2,8 +2,6 @@
 //! when present. Each test prints a line and passes when its file is absent
 //! (fails with `MURK_REQUIRE_REAL_DATA=1`: see `murk_types::real_data`).
 
-use std::path::Path;
-
 use murk_io::{ReadOptions, read_cloud, read_frames};
 use murk_types::IntensityScale;
 
