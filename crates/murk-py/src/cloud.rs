@@ -194,9 +194,8 @@ impl View<'_> {
                 c.intensity_scale = scale;
                 c
             }
-            Layout::Xyzi => {
-                murk_io::parse_kitti(&record_bytes(self.records), src, &opts).map_err(|e| io_arg(&e))?
-            }
+            Layout::Xyzi => murk_io::parse_kitti(&record_bytes(self.records), src, &opts)
+                .map_err(|e| io_arg(&e))?,
             Layout::Xyzir => murk_io::parse_nuscenes(&record_bytes(self.records), src, &opts)
                 .map_err(|e| io_arg(&e))?,
             Layout::Xyzit => {
@@ -238,7 +237,10 @@ fn shape(dims: &[usize]) -> String {
         [n] => format!("({n},)"),
         _ => format!(
             "({})",
-            dims.iter().map(|d| d.to_string()).collect::<Vec<_>>().join(", ")
+            dims.iter()
+                .map(|d| d.to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
         ),
     }
 }
@@ -357,10 +359,7 @@ fn from_dict<'py>(d: &Bound<'py, PyDict>, arg: &str) -> PyResult<Points<'py>> {
         let k: String = key
             .extract()
             .map_err(|_| input(format!("{arg}: column names must be strings")))?;
-        if !matches!(
-            k.as_str(),
-            "x" | "y" | "z" | "intensity" | "ring" | "time"
-        ) {
+        if !matches!(k.as_str(), "x" | "y" | "z" | "intensity" | "ring" | "time") {
             return Err(input(format!(
                 "{arg}: unknown column {k:?}: expected x, y, z, intensity, ring, time"
             )));

@@ -139,7 +139,9 @@ fn table_arg(obj: &Bound<'_, PyAny>) -> PyResult<(Arc<CoefficientTable>, String)
         return Ok((t.inner.clone(), t.label()));
     }
     let path: PathBuf = obj.extract().map_err(|_| {
-        input("table: expected a murk.Table or the path of a coefficient table (str or os.PathLike)")
+        input(
+            "table: expected a murk.Table or the path of a coefficient table (str or os.PathLike)",
+        )
     })?;
     let t = CoefficientTable::read(&path).map_err(|e| errors::types(&e))?;
     Ok((Arc::new(t), path.display().to_string()))
@@ -394,9 +396,7 @@ fn apply(
                     .build_labelled(&table, &label)
                     .map_err(|e| errors::infer(&e))?;
                 let cloud = view.decode(scale, "points")?;
-                let (out, s) = applier
-                    .apply(&cloud, &key)
-                    .map_err(|e| errors::infer(&e))?;
+                let (out, s) = applier.apply(&cloud, &key).map_err(|e| errors::infer(&e))?;
                 drop(cloud);
                 let json = if summary {
                     let model = applier.describe();
@@ -455,6 +455,11 @@ fn batch_options(
     })
 }
 
+/// A planned job: input, output, scan key.
+type PlannedJob = (String, String, String);
+/// A file of an input folder left out, and why.
+type SkippedFile = (String, String);
+
 /// `murk apply`'s plan: which input goes to which output under `out`, with
 /// the scan key of each; and the files of input folders left out.
 #[pyfunction]
@@ -464,7 +469,7 @@ fn plan(
     inputs: Vec<PathBuf>,
     out: PathBuf,
     format: Option<&str>,
-) -> PyResult<(Vec<(String, String, String)>, Vec<(String, String)>)> {
+) -> PyResult<(Vec<PlannedJob>, Vec<SkippedFile>)> {
     let opts = batch_options(format, "binary", None)?;
     let plan = py
         .detach(|| murk_infer::batch::plan(&inputs, &out, &opts))
@@ -558,9 +563,10 @@ fn apply_file(
                 // the key is the caller's, as in the folder plan it came from.
                 let mut p = murk_infer::batch::plan(std::slice::from_ref(&input), &parent, &opts)
                     .map_err(|e| errors::infer(&e))?;
-                let mut job = p.jobs.pop().ok_or_else(|| {
-                    input_err(&input, "is not a point-cloud file")
-                })?;
+                let mut job = p
+                    .jobs
+                    .pop()
+                    .ok_or_else(|| input_err(&input, "is not a point-cloud file"))?;
                 if job.output.file_name() != output.file_name() {
                     return Err(input_err(
                         &input,
@@ -628,17 +634,18 @@ fn fit(
                 "censor_fraction" => p.censor_fraction(f(&v)?),
                 "edge" => {
                     let s: String = v.extract()?;
-                    p.edge(s.parse::<murk_fit::EdgeShape>().map_err(|e| {
-                        input(format!("edge: {}", errors::message(&e)))
-                    })?)
+                    p.edge(
+                        s.parse::<murk_fit::EdgeShape>()
+                            .map_err(|e| input(format!("edge: {}", errors::message(&e))))?,
+                    )
                 }
                 "per_band_width" => p.shared_edge_width(!b(&v)?),
                 "fixed_dropout" => p.free_dropout(!b(&v)?),
                 "bootstrap" | "bootstrap_replicates" => {
                     let n = u(&v)?;
-                    p.bootstrap_replicates(u32::try_from(n).map_err(|_| {
-                        input(format!("{name}: {n} is too large"))
-                    })?)
+                    p.bootstrap_replicates(
+                        u32::try_from(n).map_err(|_| input(format!("{name}: {n} is too large")))?,
+                    )
                 }
                 "seed" => p.seed(u(&v)?),
                 "radar_tolerance" | "radar_tolerance_m" => p.radar_tolerance_m(f(&v)?),
@@ -654,8 +661,8 @@ fn fit(
     let table = py
         .detach(|| {
             pool::run(threads, || -> PyResult<CoefficientTable> {
-                let c = murk_campaign::Campaign::open(&campaign)
-                    .map_err(|e| errors::campaign(&e))?;
+                let c =
+                    murk_campaign::Campaign::open(&campaign).map_err(|e| errors::campaign(&e))?;
                 let fitted = valid.fit(&c).map_err(|e| errors::fit(&e))?;
                 Ok(fitted.table().clone())
             })
@@ -711,12 +718,15 @@ fn diagnose(
         .map_err(|e| errors::diagnose(&e))?;
     let (json, ext) = py
         .detach(|| {
-            pool::run(threads, || -> PyResult<(String, Option<CoefficientTable>)> {
-                let c = murk_campaign::Campaign::open(&campaign)
-                    .map_err(|e| errors::campaign(&e))?;
-                let d = params.run(&c).map_err(|e| errors::diagnose(&e))?;
-                Ok((d.report.to_json(), d.extended_table))
-            })
+            pool::run(
+                threads,
+                || -> PyResult<(String, Option<CoefficientTable>)> {
+                    let c = murk_campaign::Campaign::open(&campaign)
+                        .map_err(|e| errors::campaign(&e))?;
+                    let d = params.run(&c).map_err(|e| errors::diagnose(&e))?;
+                    Ok((d.report.to_json(), d.extended_table))
+                },
+            )
         })
         .map_err(pool_err)??;
     let report = py.import("json")?.call_method1("loads", (json,))?;

@@ -71,7 +71,11 @@ def read(
     format: Optional[str] = None,
     intensity_scale: IntensityScaleArg = None,
     frames: Literal[False] = False,
-) -> Columns: ...
+) -> Columns:
+    """Read a point-cloud file (format from the extension, or ``format``: pcd, bin,
+    nuscenes, csv, parquet, pcap) into numpy columns. Intensity is as stored (never
+    converted). ``frames=True`` gives one dict per revolution of a pcap. Raises FileError."""
+
 @overload
 def read(
     path: PathLike,
@@ -80,17 +84,6 @@ def read(
     intensity_scale: IntensityScaleArg = None,
     frames: Literal[True],
 ) -> List[Columns]: ...
-def read(
-    path: PathLike,
-    *,
-    format: Optional[str] = None,
-    intensity_scale: IntensityScaleArg = None,
-    frames: bool = False,
-) -> Union[Columns, List[Columns]]:
-    """Read a point-cloud file (format from the extension, or ``format``: pcd, bin,
-    nuscenes, csv, parquet, pcap) into numpy columns. Intensity is as stored (never
-    converted). ``frames=True`` gives one dict per revolution of a pcap. Raises FileError."""
-
 def write(
     path: PathLike,
     cloud: Points,
@@ -128,7 +121,30 @@ def apply(
     clear_mor_threshold: Optional[float] = None,
     threads: Optional[int] = None,
     summary: Literal[False] = False,
-) -> Any: ...
+) -> Any:
+    """Degrade one scan with ``table``'s model of ``weather`` at ``mor`` metres
+    (or ``rain_rate`` mm/h, converted by the table). Keyword arguments are the
+    flags of ``murk apply``.
+
+    ``points``: float32 C-contiguous ``(N, 4)`` (KITTI ``x y z intensity``;
+    intensity 0–1 by default), ``(N, 5)`` (``layout="xyzir"``, the default:
+    nuScenes/STF ring last; ``layout="xyzit"``: time last), or a dict of
+    columns. Arrays of records are read without a copy. The result has the
+    same layout (a dict for a dict): kept points in order, then added
+    near-range returns.
+
+    Reproducing the CLI: ``murk apply FILE --seed S`` seeds each scan by
+    ``(S, key)`` where ``key`` is the file's path relative to the input
+    argument (its file name for a file argument). ``apply(points, table,
+    weather, mor=M, seed=S, key="000008.bin")`` on that file's records gives
+    the same bytes the CLI writes. Default ``key``: ``""``.
+
+    ``intensity_scale``: the scale the input's intensity is in (default: KITTI
+    0–1 for ``xyzi``, calibrated otherwise; names as ``--intensity-scale``, or
+    ``(gain, offset)``). ``summary=True`` also returns the applied model and
+    the scan's counts (``murk-apply-summary/1``'s ``model`` and file entry).
+    """
+
 @overload
 def apply(
     points: Points,
@@ -155,30 +171,6 @@ def apply(
     threads: Optional[int] = None,
     summary: Literal[True],
 ) -> Tuple[Any, Dict[str, Any]]: ...
-def apply(points: Points, table: Union[Table, PathLike], weather: str, **kwargs: Any) -> Any:
-    """Degrade one scan with ``table``'s model of ``weather`` at ``mor`` metres
-    (or ``rain_rate`` mm/h, converted by the table). Keyword arguments are the
-    flags of ``murk apply``.
-
-    ``points``: float32 C-contiguous ``(N, 4)`` (KITTI ``x y z intensity``;
-    intensity 0–1 by default), ``(N, 5)`` (``layout="xyzir"``, the default:
-    nuScenes/STF ring last; ``layout="xyzit"``: time last), or a dict of
-    columns. Arrays of records are read without a copy. The result has the
-    same layout (a dict for a dict): kept points in order, then added
-    near-range returns.
-
-    Reproducing the CLI: ``murk apply FILE --seed S`` seeds each scan by
-    ``(S, key)`` where ``key`` is the file's path relative to the input
-    argument (its file name for a file argument). ``apply(points, table,
-    weather, mor=M, seed=S, key="000008.bin")`` on that file's records gives
-    the same bytes the CLI writes. Default ``key``: ``""``.
-
-    ``intensity_scale``: the scale the input's intensity is in (default: KITTI
-    0–1 for ``xyzi``, calibrated otherwise; names as ``--intensity-scale``, or
-    ``(gain, offset)``). ``summary=True`` also returns the applied model and
-    the scan's counts (``murk-apply-summary/1``'s ``model`` and file entry).
-    """
-
 def fit(campaign: PathLike, *, threads: Optional[int] = None, **params: Any) -> Table:
     """``murk fit CAMPAIGN``: the coefficient table of a campaign folder.
 
@@ -203,7 +195,10 @@ def diagnose(
     local_box: Optional[Sequence[float]] = None,
     threads: Optional[int] = None,
     extended_table: Literal[False] = False,
-) -> Dict[str, Any]: ...
+) -> Dict[str, Any]:
+    """``murk diagnose CAMPAIGN --weather W``: the report (``murk diagnose``'s
+    JSON) as a dict; with ``extended_table=True`` also the extended table (or None)."""
+
 @overload
 def diagnose(
     campaign: PathLike,
@@ -220,10 +215,6 @@ def diagnose(
     threads: Optional[int] = None,
     extended_table: Literal[True],
 ) -> Tuple[Dict[str, Any], Optional[Table]]: ...
-def diagnose(campaign: PathLike, weather: str, **kwargs: Any) -> Any:
-    """``murk diagnose CAMPAIGN --weather W``: the report (``murk diagnose``'s
-    JSON) as a dict; with ``extended_table=True`` also the extended table (or None)."""
-
 def set_num_threads(n: int) -> None:
     """Default worker threads of every call (0: back to ``MURK_NUM_THREADS``, else the CPU count)."""
 
