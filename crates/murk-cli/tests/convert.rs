@@ -1,7 +1,7 @@
 //! `murk convert` end to end: a generated scan through every writable format
 //! and back, folder walking, pcap frames, and refusing to overwrite inputs.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Output};
 
 use murk_io::{ReadOptions, read_cloud, write_cloud};
