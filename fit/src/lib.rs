@@ -92,4 +92,4 @@ pub use diagnostics::{
 };
 pub use driver::{FitInputs, RecordingInput};
 pub use error::FitError;
-pub use hyperparams::{Band, EdgeShape, FitParams, FitValidParams};
+pub use hyperparams::{Band, EdgeShape, FitParams, FitValidParams, parse_edge};

@@ -18,7 +18,7 @@
 //! its range and reflectivity, and the output keeps the input's order,
 //! intensity scale and time column.
 
-use murk_types::{LidarSpec, NoiseLaw, PointCloud, SurvivalFit, WeatherClass};
+use murk_types::{EdgeShape, LidarSpec, NoiseLaw, PointCloud, SurvivalFit, WeatherClass};
 use serde::Serialize;
 
 use crate::error::InferError;
@@ -45,18 +45,11 @@ pub struct BandRule {
     pub edge_width: Option<f64>,
 }
 
-/// The CDF of the survival edge.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "lowercase")]
-pub(crate) enum EdgeLaw {
-    Probit,
-    Logistic,
-}
-
 /// The fitted survival edge.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub(crate) struct SoftEdge {
-    pub edge: EdgeLaw,
+    /// The edge law, murk-types' one definition (the one fit fitted).
+    pub edge: EdgeShape,
     pub dropout: f64,
     pub residual: f64,
     /// `1 / (1 − dropout_clear)`: the input is a clear recording that
@@ -67,11 +60,7 @@ pub(crate) struct SoftEdge {
 
 impl SoftEdge {
     pub(crate) fn new(s: &SurvivalFit) -> Result<SoftEdge, String> {
-        let edge = match s.edge.as_str() {
-            "probit" => EdgeLaw::Probit,
-            "logistic" => EdgeLaw::Logistic,
-            other => return Err(format!("edge {other:?} is not probit or logistic")),
-        };
+        let edge = s.edge;
         if s.dropout + s.residual > 1.0 {
             return Err(format!(
                 "dropout {} + residual {} exceed 1",
@@ -90,11 +79,18 @@ impl SoftEdge {
         })
     }
 
-    /// `P(kept)` given the edge CDF value `f` at the point's range.
+    /// Unconditional `P(kept)` at standardised distance `z = (r − D)/(w·D)`
+    /// from the vanishing distance: [`EdgeShape::keep_probability`].
     #[inline]
-    pub(crate) fn keep_probability(&self, f: f64) -> f64 {
-        let p = self.residual + (1.0 - self.dropout - self.residual) * (1.0 - f);
-        (p * self.clear_factor).min(1.0)
+    pub(crate) fn keep_probability(&self, z: f64) -> f64 {
+        self.edge.keep_probability(z, self.dropout, self.residual)
+    }
+
+    /// `P(kept)` at `z` given that the return is present in the clear input
+    /// (which already lost the clear-weather dropout).
+    #[inline]
+    pub(crate) fn keep_probability_given_clear(&self, z: f64) -> f64 {
+        (self.keep_probability(z) * self.clear_factor).min(1.0)
     }
 }
 
@@ -294,8 +290,8 @@ impl Applier {
             slope_field: self.slope_source.field(),
             vanishing: match self.soft.map(|s| s.edge) {
                 None => "hard",
-                Some(EdgeLaw::Probit) => "soft-probit",
-                Some(EdgeLaw::Logistic) => "soft-logistic",
+                Some(EdgeShape::Probit) => "soft-probit",
+                Some(EdgeShape::Logistic) => "soft-logistic",
             },
             near_range: self.near_range,
             range_noise_m: (self.range_noise_m > 0.0).then_some(self.range_noise_m),

@@ -28,9 +28,9 @@ use rand::RngExt;
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 
-use crate::applier::{Applier, EdgeLaw};
+use crate::applier::Applier;
 use crate::error::InferError;
-use crate::sampling::{Purpose, ScanSeed, norm_cdf};
+use crate::sampling::{Purpose, ScanSeed};
 use crate::summary::ApplySummary;
 
 /// Points per seeded chunk.
@@ -115,17 +115,11 @@ impl Applier {
                 }
             }
             Some(s) => {
-                let w = b.edge_width.unwrap_or(f64::NAN) * d;
-                let z = (range_m - d) / w;
-                let f = match s.edge {
-                    EdgeLaw::Probit => norm_cdf(z),
-                    EdgeLaw::Logistic => 1.0 / (1.0 + (-z).exp()),
-                };
-                let p = s.residual + (1.0 - s.dropout - s.residual) * (1.0 - f);
+                let z = murk_types::EdgeShape::z(range_m, d, b.edge_width.unwrap_or(f64::NAN));
                 if given_clear_presence {
-                    (p * s.clear_factor).min(1.0)
+                    s.keep_probability_given_clear(z)
                 } else {
-                    p
+                    s.keep_probability(z)
                 }
             }
         }

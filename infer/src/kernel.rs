@@ -22,8 +22,8 @@ use murk_types::{IntensityScale, PointCloud};
 use rand::RngExt;
 use rayon::prelude::*;
 
-use crate::applier::{BandRule, EdgeLaw, SoftEdge};
-use crate::sampling::{CHUNK, Purpose, ScanSeed, norm_cdf};
+use crate::applier::{BandRule, SoftEdge};
+use crate::sampling::{CHUNK, Purpose, ScanSeed};
 
 /// Most reflectivity bands a table may have.
 pub(crate) const MAX_BANDS: usize = 16;
@@ -280,11 +280,7 @@ pub(crate) fn soft_mask(
                     .hypot(cloud.y[i] as f64)
                     .hypot(cloud.z[i] as f64);
                 let zc = (r - centre[b]) / width[b];
-                let f = match soft.edge {
-                    EdgeLaw::Probit => norm_cdf(zc),
-                    EdgeLaw::Logistic => 1.0 / (1.0 + (-zc).exp()),
-                };
-                let p = soft.keep_probability(f);
+                let p = soft.keep_probability_given_clear(zc);
                 let u: f64 = rng.random();
                 let keep = u < p;
                 *slot = keep as u8;

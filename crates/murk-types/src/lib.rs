@@ -15,6 +15,8 @@
 //!   for formats that carry no ring.
 //! - [`PointFormat`]: the point-cloud file formats murk reads and writes.
 //! - [`WeatherClass`]: clear, fog, rain, snow.
+//! - [`EdgeShape`]: the soft survival edge law (probit or unit-variance
+//!   logistic), fitted by `fit`, applied by `infer`.
 //! - [`CoefficientTable`]: the fitted weather-noise coefficients
 //!   (`weather-noise-coefficients/1`), the contract between fit and apply.
 //!
@@ -38,6 +40,7 @@
 mod atomic;
 mod bins;
 mod cloud;
+mod edge;
 mod error;
 mod extension;
 mod format;
@@ -54,6 +57,7 @@ pub use atomic::{
 };
 pub use bins::nice_step;
 pub use cloud::PointCloud;
+pub use edge::{EdgeShape, LOGISTIC_UNIT};
 pub use error::TypesError;
 pub use extension::{
     CovariateValue, ExtensionFunction, ExtensionObservable, ModelExtension, POINT_COVARIATES,
