@@ -80,6 +80,7 @@ use std::collections::BTreeMap;
 
 use murk_campaign::Campaign;
 use murk_fit::{FitParams, FitValidParams};
+use murk_types::seed::Purpose;
 use murk_types::{
     CoefficientTable, CovariateValue, ExtensionObservable, POINT_COVARIATES, WeatherClass,
 };
@@ -374,16 +375,11 @@ fn residuals(loaded: &Loaded, evals: &[RecEval]) -> Residuals {
     Residuals { points, scans }
 }
 
-fn seed_of(seed: u64, parts: &[&str]) -> u64 {
-    use sha2::{Digest, Sha256};
-    let mut h = Sha256::new();
-    h.update(seed.to_le_bytes());
-    for p in parts {
-        h.update(p.as_bytes());
-        h.update([0]);
-    }
-    let d = h.finalize();
-    u64::from_le_bytes(d[..8].try_into().expect("8 bytes"))
+/// The seed of one randomised step: murk's one derivation
+/// ([`murk_types::seed::derive`]) of the master seed, the step's key and
+/// its purpose.
+fn seed_of(seed: u64, purpose: Purpose, parts: &[&str]) -> u64 {
+    murk_types::seed::derive(seed, &murk_types::seed::key(parts), purpose).to_u64()
 }
 
 impl DiagnoseValidParams {
@@ -415,7 +411,11 @@ impl DiagnoseValidParams {
         // Folds.
         let k = p.folds.min(n);
         let mut order: Vec<usize> = (0..n).collect();
-        order.shuffle(&mut ChaCha8Rng::seed_from_u64(seed_of(p.seed, &["folds"])));
+        order.shuffle(&mut ChaCha8Rng::seed_from_u64(seed_of(
+            p.seed,
+            Purpose::DiagnoseFolds,
+            &["folds"],
+        )));
         let mut fold_of = vec![0; n];
         for (pos, &j) in order.iter().enumerate() {
             fold_of[j] = pos % k;
@@ -424,7 +424,7 @@ impl DiagnoseValidParams {
             sims: p.sims,
             voxel_m: p.voxel_m,
             local_box: p.local_box,
-            seed: seed_of(p.seed, &["simulate"]),
+            seed: seed_of(p.seed, Purpose::DiagnoseSimulate, &["simulate"]),
         };
         // Baseline per fold, held-out evaluation.
         let mut tables = Vec::with_capacity(k);
@@ -722,7 +722,7 @@ impl DiagnoseValidParams {
         specs
             .par_iter()
             .filter_map(|(obs, cov, point)| {
-                let seed = seed_of(p.seed, &["test", obs.name(), cov]);
+                let seed = seed_of(p.seed, Purpose::DiagnoseTest, &["test", obs.name(), cov]);
                 if *point {
                     let units: Vec<(usize, f64, f64, f64)> = res
                         .points
@@ -863,6 +863,7 @@ impl DiagnoseValidParams {
         let nrec = evals.len();
         let seed = seed_of(
             p.seed,
+            Purpose::DiagnoseTest,
             &["retest", a.observable.name(), &a.covariate, &b.covariate],
         );
         let labels = b.binning.labels();

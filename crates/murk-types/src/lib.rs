@@ -15,6 +15,8 @@
 //!   for formats that carry no ring.
 //! - [`PointFormat`]: the point-cloud file formats murk reads and writes.
 //! - [`WeatherClass`]: clear, fog, rain, snow.
+//! - [`seed`]: the one seed derivation, `(seed, item key, purpose)`, of
+//!   every randomised step.
 //! - [`CoefficientTable`]: the fitted weather-noise coefficients
 //!   (`weather-noise-coefficients/1`), the contract between fit and apply.
 //!
@@ -43,6 +45,7 @@ mod extension;
 mod format;
 mod intensity;
 mod lidar;
+pub mod seed;
 mod table;
 mod weather;
 
