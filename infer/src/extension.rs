@@ -28,8 +28,9 @@ use rand::RngExt;
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 
-use crate::applier::{Applier, EdgeLaw};
+use crate::applier::Applier;
 use crate::error::InferError;
+use crate::model::EdgeLaw;
 use crate::sampling::{Purpose, ScanSeed, norm_cdf};
 use crate::summary::ApplySummary;
 
@@ -251,7 +252,7 @@ impl Applier {
             }
         }
         if self.near_range {
-            let scaled = |l: &Option<crate::applier::NearLaw>| {
+            let scaled = |l: &Option<crate::model::NearLaw>| {
                 l.clone().map(|mut l| {
                     l.expected *= count;
                     l

@@ -22,7 +22,7 @@ use murk_types::{IntensityScale, PointCloud};
 use rand::RngExt;
 use rayon::prelude::*;
 
-use crate::applier::{BandRule, EdgeLaw, SoftEdge};
+use crate::model::{BandRule, EdgeLaw, SoftEdge};
 use crate::sampling::{CHUNK, Purpose, ScanSeed, norm_cdf};
 
 /// Most reflectivity bands a table may have.
