@@ -161,7 +161,7 @@ pub(crate) struct RainUse {
     pub warning: Option<String>,
 }
 
-/// A serialisable description of an [`Applier`]: what was applied.
+/// A serialisable description of an [`Applier`](crate::Applier): what was applied.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 #[non_exhaustive]
 pub struct ModelSummary {
