@@ -495,7 +495,7 @@ pub fn weather(
         &rows,
         p.bootstrap_replicates(),
         p.seed(),
-        cx.class as u64 + 1,
+        &format!("lidar/{}", cx.class.name()),
     )
     .map(uncertainty);
 

@@ -29,8 +29,9 @@ use murk_types::{PointCloud, PointFormat, StagedFile};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::applier::{Applier, ModelSummary};
+use crate::applier::Applier;
 use crate::error::InferError;
+use crate::model::ModelSummary;
 use crate::summary::{ApplySummary, SUMMARY_FORMAT};
 
 /// One input file and where its output goes.
@@ -103,7 +104,8 @@ pub struct BatchReport {
     pub format: &'static str,
     /// What was applied.
     pub model: ModelSummary,
-    /// Counts summed over every file.
+    /// Counts summed over every file; its `warnings` are the scans' own, in
+    /// plan order (the model's are in `model.warnings`, once).
     pub totals: ApplySummary,
     /// Per file, in plan order.
     pub files: Vec<FileReport>,
@@ -566,9 +568,6 @@ pub fn run_until(
     for f in &files {
         totals.add(&f.summary);
     }
-    totals
-        .warnings
-        .splice(0..0, applier.warnings().iter().cloned());
     Ok(BatchReport {
         format: SUMMARY_FORMAT,
         model: applier.describe(),

@@ -245,7 +245,7 @@ impl Applier {
             }
         }
         if self.near_range {
-            let scaled = |l: &Option<crate::applier::NearLaw>| {
+            let scaled = |l: &Option<crate::model::NearLaw>| {
                 l.clone().map(|mut l| {
                     l.expected *= count;
                     l

@@ -22,7 +22,7 @@ use murk_types::{IntensityScale, PointCloud};
 use rand::RngExt;
 use rayon::prelude::*;
 
-use crate::applier::{BandRule, SoftEdge};
+use crate::model::{BandRule, SoftEdge};
 use crate::sampling::{CHUNK, Purpose, ScanSeed};
 
 /// Most reflectivity bands a table may have.

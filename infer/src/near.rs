@@ -32,8 +32,8 @@ use rand_distr::{Distribution, Poisson};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::applier::NearLaw;
 use crate::error::InferError;
+use crate::model::NearLaw;
 use crate::sampling::{CHUNK, Purpose, ScanSeed};
 
 /// What became of the near-range returns of one kind in one scan.

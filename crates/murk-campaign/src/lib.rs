@@ -64,6 +64,7 @@ mod error;
 pub mod rules;
 mod select;
 mod suggest;
+mod vocabulary;
 mod weather;
 
 pub use campaign::{Campaign, RadarSpec, layout};
@@ -75,7 +76,5 @@ pub use rules::{
 pub use select::{
     ClassSummary, HistogramBin, MorStats, NOT_REVIEWED, SelectedRecording, Selection, Summary,
 };
-pub use weather::{
-    Cell, Column, ColumnRole, Covariate, KNOWN_SENSOR_COLUMNS, LidarFile, Recording, Review,
-    SensorKind, columns,
-};
+pub use vocabulary::{Cell, Covariate, KNOWN_SENSOR_COLUMNS, SensorKind, columns};
+pub use weather::{Column, ColumnRole, LidarFile, Recording, Review};

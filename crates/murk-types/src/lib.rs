@@ -17,6 +17,8 @@
 //! - [`WeatherClass`]: clear, fog, rain, snow.
 //! - [`EdgeShape`]: the soft survival edge law (probit or unit-variance
 //!   logistic), fitted by `fit`, applied by `infer`.
+//! - [`seed`]: the one seed derivation, `(seed, item key, purpose)`, of
+//!   every randomised step.
 //! - [`CoefficientTable`]: the fitted weather-noise coefficients
 //!   (`weather-noise-coefficients/1`), the contract between fit and apply.
 //!
@@ -47,6 +49,7 @@ mod format;
 mod intensity;
 mod lidar;
 pub mod real_data;
+pub mod seed;
 mod table;
 mod walk;
 mod weather;

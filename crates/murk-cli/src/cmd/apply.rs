@@ -99,8 +99,8 @@ pub struct Args {
     /// elevations for ring derivation and near-range rays, azimuth grid).
     #[arg(long)]
     pub campaign: Option<PathBuf>,
-    /// MOR (m) at and above which applying is the identity; default: the
-    /// table's, else 2000.
+    /// MOR (m) at and above which applying is the identity (default 2000,
+    /// the PDD rules' clear threshold; the table does not record one).
     #[arg(long)]
     pub clear_mor_threshold: Option<f64>,
     /// Also write the JSON report (murk-apply-summary/1) here.
@@ -234,7 +234,9 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     if let Some(path) = &a.summary {
         report.write(path)?;
     }
-    for w in report.totals.warnings.iter().skip(applier.warnings().len()) {
+    // The model's warnings were printed above (and are `model.warnings` in
+    // the report); the totals carry the scans' own.
+    for w in &report.totals.warnings {
         errln!("murk: warning: {w}");
     }
     print_summary(&report.totals, &report.model, report.files.len(), &a.out);
