@@ -216,21 +216,44 @@ fn a_pcap_becomes_one_file_per_frame() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
+    let names_in = |d: &Path| {
+        let mut names: Vec<String> = std::fs::read_dir(d)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().into_string().unwrap())
+            .collect();
+        names.sort();
+        names
+    };
+    // By default the partial first and last revolutions are left out,
+    // named, and the frames keep their capture numbers.
     let out = dir.path().join("frames");
     let stdout = ok(&["convert", s(&pcap), "--out", s(&out), "--format", "pcd"]);
     let frames_dir = out.join("vlp16-test-90deg-1-50-frames");
-    let mut names: Vec<String> = std::fs::read_dir(&frames_dir)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().into_string().unwrap())
-        .collect();
-    names.sort();
-    assert!(names.len() > 1, "{names:?}");
-    assert_eq!(names[0], "frame-000001.pcd");
-    let want: Vec<String> = (1..=names.len())
-        .map(|k| format!("frame-{k:06}.pcd"))
-        .collect();
+    let names = names_in(&frames_dir);
+    let want: Vec<String> = (2..=51).map(|k| format!("frame-{k:06}.pcd")).collect();
     assert_eq!(names, want);
-    // The frames hold every point of the capture.
+    assert!(stdout.contains("(50 frames)"), "{stdout}");
+    assert!(
+        stdout.contains("left out 2 partial revolutions: frame-000001.pcd")
+            && stdout.contains("frame-000052.pcd"),
+        "{stdout}"
+    );
+
+    // --keep-partial: every revolution, holding every point of the capture.
+    let out = dir.path().join("all");
+    let stdout = ok(&[
+        "convert",
+        s(&pcap),
+        "--out",
+        s(&out),
+        "--format",
+        "pcd",
+        "--keep-partial",
+    ]);
+    let frames_dir = out.join("vlp16-test-90deg-1-50-frames");
+    let names = names_in(&frames_dir);
+    let want: Vec<String> = (1..=52).map(|k| format!("frame-{k:06}.pcd")).collect();
+    assert_eq!(names, want);
     let all = read_cloud(&pcap, &ReadOptions::default()).unwrap();
     let total: usize = names
         .iter()
@@ -242,7 +265,7 @@ fn a_pcap_becomes_one_file_per_frame() {
         .sum();
     assert_eq!(total, all.len());
     assert!(
-        stdout.contains(&format!("({} frames)", names.len())),
+        stdout.contains("(52 frames)") && stdout.contains("2 of them partial"),
         "{stdout}"
     );
 }
