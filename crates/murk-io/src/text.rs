@@ -1632,7 +1632,7 @@ mod tests {
         // A fresh point on the row's ray keeps ring and time, not the note.
         edit.fresh = true;
         let out = rows.encode_subset(text, &[1, 0, 1], &[edit], None);
-        let want = "ring,x,y,z,intensity,time,note\r\n3,10,0,0,7,1700000000.5,a b\r\n5,1.5,-0.25,0.1,3,1700000001,\r\n";
+        let want = "ring,x,y,z,intensity,time,note\r\n3,10,0,0,7,1700000000.5,a b\r\n5,1.5,-0.25,0.1,3,1700000001,";
         assert_eq!(String::from_utf8(out).unwrap(), want);
     }
 
