@@ -247,6 +247,23 @@ impl Applier {
         mask: &mut Vec<u8>,
         want_cloud: bool,
     ) -> Result<(Option<PointCloud>, ApplySummary), InferError> {
+        self.apply_marked(cloud, key, mask, want_cloud, &mut Vec::new())
+    }
+
+    /// [`Applier::apply_masked`], also giving in `replaced` the indices of
+    /// the output (ascending, kept points only) whose point a near-range
+    /// return replaced: the point there is a fog or rain echo on the
+    /// original's ray, not the original return, so a writer that carries a
+    /// row's other cells (labels, colours) leaves them empty for it.
+    pub fn apply_marked(
+        &self,
+        cloud: &PointCloud,
+        key: &str,
+        mask: &mut Vec<u8>,
+        want_cloud: bool,
+        replaced: &mut Vec<usize>,
+    ) -> Result<(Option<PointCloud>, ApplySummary), InferError> {
+        replaced.clear();
         Self::check_cloud(cloud, key)?;
         let mut summary = ApplySummary::empty(key, &self.bands);
         summary.points_in = cloud.len() as u64;
@@ -292,6 +309,7 @@ impl Applier {
             b.vanished = n - kept;
         }
         summary.below_bands = counts.below();
+        summary.below_bands_vanished = counts.below_vanished();
         summary.above_bands = counts.above;
         if !want_cloud && !self.changes_points() {
             summary.points_out = counts.kept;
@@ -318,6 +336,7 @@ impl Applier {
                 seed,
                 key,
                 &mut summary,
+                replaced,
             )?;
         }
         summary.points_out = out.len() as u64;
@@ -334,6 +353,7 @@ impl Applier {
         seed: ScanSeed,
         key: &str,
         summary: &mut ApplySummary,
+        replaced: &mut Vec<usize>,
     ) -> Result<(), InferError> {
         let settings = NearSettings {
             ghost: laws.0,
@@ -341,7 +361,15 @@ impl Applier {
             lidar: self.lidar.as_ref(),
             azimuth_resolution_deg: self.azimuth_resolution_deg,
         };
-        let (g, r) = add_near_range(cloud, out, &settings, seed, key, &mut summary.warnings)?;
+        let (g, r) = add_near_range(
+            cloud,
+            out,
+            &settings,
+            seed,
+            key,
+            &mut summary.warnings,
+            replaced,
+        )?;
         summary.ghost = g;
         summary.ring = r;
         Ok(())

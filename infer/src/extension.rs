@@ -157,6 +157,8 @@ impl Applier {
         struct Out {
             keep: bool,
             band: usize,
+            /// Below the lowest band (follows its slope, counted apart).
+            below: bool,
             range_factor: f32,
             intensity: f32,
         }
@@ -197,6 +199,7 @@ impl Applier {
                         Out {
                             keep,
                             band: self.band_index(refl),
+                            below: refl < self.bands[0].reflectivity_min,
                             range_factor,
                             intensity,
                         }
@@ -212,12 +215,18 @@ impl Applier {
             out.time = Some(Vec::with_capacity(n));
         }
         let mut per_band = vec![(0u64, 0u64); self.bands.len()];
+        let (mut below, mut below_kept) = (0u64, 0u64);
         for (i, o) in per_chunk.iter().flatten().enumerate() {
-            per_band[o.band].0 += 1;
+            if o.below {
+                below += 1;
+                below_kept += o.keep as u64;
+            } else {
+                per_band[o.band].0 += 1;
+                per_band[o.band].1 += o.keep as u64;
+            }
             if !o.keep {
                 continue;
             }
-            per_band[o.band].1 += 1;
             let k = o.range_factor;
             out.x.push(cloud.x[i] * k);
             out.y.push(cloud.y[i] * k);
@@ -229,6 +238,8 @@ impl Applier {
             }
         }
         summary.vanished = (n - out.len()) as u64;
+        summary.below_bands = below;
+        summary.below_bands_vanished = below - below_kept;
         for (b, (pts, kept)) in summary.bands.iter_mut().zip(&per_band) {
             b.points_in = *pts;
             b.vanished = pts - kept;
@@ -259,6 +270,7 @@ impl Applier {
                 seed,
                 key,
                 &mut summary,
+                &mut Vec::new(),
             )?;
         }
         summary.points_out = out.len() as u64;

@@ -144,7 +144,10 @@ fn poisson(rng: &mut ChaCha8Rng, lambda: f64) -> u64 {
 }
 
 /// Adds the near-range returns of one scan to `out` (the scan after
-/// vanishing and perturbation); `input` is the scan as read.
+/// vanishing and perturbation); `input` is the scan as read. The indices
+/// of `out` whose point a soft target replaced go to `replaced`, ascending
+/// (a writer that copies the other cells of a row must not give them to
+/// a fog echo).
 pub(crate) fn add_near_range(
     input: &PointCloud,
     out: &mut PointCloud,
@@ -152,6 +155,7 @@ pub(crate) fn add_near_range(
     seed: ScanSeed,
     key: &str,
     warnings: &mut Vec<String>,
+    replaced: &mut Vec<usize>,
 ) -> Result<(Option<NearRangeCounts>, Option<NearRangeCounts>), InferError> {
     let mut rng = seed.rng(Purpose::NearRange, 0);
     let n_ghost = s.ghost.map_or(0, |l| poisson(&mut rng, l.expected));
@@ -227,7 +231,7 @@ pub(crate) fn add_near_range(
             events.len()
         ));
     } else if !events.is_empty() {
-        place(input, out, s, &events, &mut outcome, bins, res);
+        place(input, out, s, &events, &mut outcome, bins, res, replaced);
     }
 
     let tally = |law: Option<&NearLaw>, ghost: bool| {
@@ -264,6 +268,7 @@ fn place(
     outcome: &mut [Outcome],
     _bins: u64,
     res: f64,
+    replaced: &mut Vec<usize>,
 ) {
     // Events by ring.
     let max_ring = events.iter().map(|e| e.ring).max().unwrap_or(0) as usize;
@@ -357,6 +362,9 @@ fn place(
             outcome[e] = Outcome::Occluded;
         }
     }
+    let first = replaced.len();
+    replaced.extend(owner.keys().copied());
+    replaced[first..].sort_unstable();
     for e in added {
         let ev = &events[e];
         let el = elevation[ev.ring as usize];

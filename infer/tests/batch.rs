@@ -177,8 +177,11 @@ fn format_change_renames_and_converts_intensity_scale() {
     assert_eq!(p.jobs[0].key, "b.pcd");
     let a = fog(5000.0);
     run(&a, &p, &opts, &|_| {}).unwrap();
-    let back = read_cloud(&out.join("b.pcd"), &ReadOptions::default()).unwrap();
-    // PCD is read as calibrated: the KITTI 0–1 values were converted.
+    let mut back = read_cloud(&out.join("b.pcd"), &ReadOptions::default()).unwrap();
+    // The PCD records the KITTI scale it was written in: read back, the
+    // reflectivities are the input's.
+    assert_eq!(back.intensity_scale, murk_types::IntensityScale::KITTI);
+    back.to_calibrated();
     let mut cal = b.clone();
     cal.to_calibrated();
     for (x, y) in back.intensity.iter().zip(&cal.intensity) {

@@ -19,6 +19,16 @@
 //!   class before and after review, outages, ambiguity, MOR distribution),
 //!   which prints as a table and serializes to JSON.
 //!
+//! **How the recordings are read.** Besides the sensor geometry, `[lidar]`
+//! says how murk-io reads the campaign's files (`fit` and `diagnose` pass
+//! it on; see `murk_types::LidarSpec`):
+//!
+//! | key | values | default |
+//! |---|---|---|
+//! | `intensity_scale` | `calibrated`, `kitti`, `six-bit`, `{ gain = G, offset = O }` | the format's (KITTI `.bin`: `kitti`; others `calibrated`) |
+//! | `bin_layout` | `xyzi` (KITTI), `xyzir` (Seeing Through Fog, nuScenes), `xyzit` | `.bin`: `xyzi` when the file size fits only it; a size that fits several layouts is refused |
+//! | `csv_columns` | e.g. `["x", "y", "z", "intensity", "ring"]` | none: CSV files start with a header line |
+//!
 //! ```
 //! use murk_campaign::Campaign;
 //! use murk_types::WeatherClass;

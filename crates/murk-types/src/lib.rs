@@ -66,7 +66,7 @@ pub use extension::{
     CovariateValue, ExtensionFunction, ExtensionObservable, ModelExtension, POINT_COVARIATES,
     PointCovariates, combine as combine_extensions,
 };
-pub use format::PointFormat;
+pub use format::{BinLayout, PointFormat};
 pub use intensity::IntensityScale;
 pub use lidar::LidarSpec;
 pub use table::{
