@@ -501,6 +501,7 @@ impl ApplyParams {
         label: &str,
         warnings: &mut Vec<String>,
     ) -> Result<Vec<murk_types::ModelExtension>, InferError> {
+        let w = self.weather;
         let extensions = if self.extensions && !identity {
             coeffs.extensions.clone()
         } else {
