@@ -125,7 +125,7 @@ fn folders_are_walked_recursively_and_keep_their_layout() {
     let out = dir.path().join("out");
     let stdout = ok(&["convert", s(&inp), "--out", s(&out), "--format", "pcd"]);
     assert!(
-        stdout.contains("converted 3 inputs into 3 pcd files (21 points)"),
+        stdout.contains("converted 3 inputs into 3 pcd files (21 points; intensity calibrated)"),
         "{stdout}"
     );
     let n = |p: &str| {

@@ -327,14 +327,16 @@ fn print_summary(
         100.0 * t.kept_fraction()
     );
     if !reports.is_empty() {
-        println!("  intensity read as {}", scales_line(reports));
+        outln!("  intensity read as {}", scales_line(reports));
     }
     if t.below_bands > 0
         && let Some(first) = m.bands.first()
     {
-        println!(
+        outln!(
             "  reflectivity below {} (under the table's first band): {} in, {} vanished (at the first band's distance)",
-            first.reflectivity_min, t.below_bands, t.below_bands_vanished
+            first.reflectivity_min,
+            t.below_bands,
+            t.below_bands_vanished
         );
     }
     for (b, r) in t.bands.iter().zip(&m.bands) {
