@@ -333,8 +333,7 @@ impl Applier {
                 cloud,
                 &mut out,
                 (self.ghost.as_ref(), self.ring.as_ref()),
-                seed,
-                key,
+                (seed, key),
                 &mut summary,
                 replaced,
             )?;
@@ -350,8 +349,7 @@ impl Applier {
         cloud: &PointCloud,
         out: &mut PointCloud,
         laws: (Option<&NearLaw>, Option<&NearLaw>),
-        seed: ScanSeed,
-        key: &str,
+        (seed, key): (ScanSeed, &str),
         summary: &mut ApplySummary,
         replaced: &mut Vec<usize>,
     ) -> Result<(), InferError> {

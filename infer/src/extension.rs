@@ -267,8 +267,7 @@ impl Applier {
                 cloud,
                 &mut out,
                 (ghost.as_ref(), ring.as_ref()),
-                seed,
-                key,
+                (seed, key),
                 &mut summary,
                 &mut Vec::new(),
             )?;

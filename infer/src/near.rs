@@ -231,7 +231,7 @@ pub(crate) fn add_near_range(
             events.len()
         ));
     } else if !events.is_empty() {
-        place(input, out, s, &events, &mut outcome, bins, res, replaced);
+        place(input, out, s, &events, &mut outcome, res, replaced);
     }
 
     let tally = |law: Option<&NearLaw>, ghost: bool| {
@@ -266,7 +266,6 @@ fn place(
     s: &NearSettings<'_>,
     events: &[Event],
     outcome: &mut [Outcome],
-    _bins: u64,
     res: f64,
     replaced: &mut Vec<usize>,
 ) {

@@ -76,7 +76,7 @@ fn bin_then_pcd_equals_bin(bin: &Path, dir: &Path) {
         ..BatchOptions::default()
     };
     let r_bin = apply(&[bin.to_path_buf()], &dir.join("o1"), &a, &opts);
-    let r_pcd = apply(&[pcd.clone()], &dir.join("o2"), &a, &opts);
+    let r_pcd = apply(std::slice::from_ref(&pcd), &dir.join("o2"), &a, &opts);
     let (t1, t2) = (&r_bin.totals, &r_pcd.totals);
     println!(
         "{}: {} in, kept {:.2} % (bin) / {:.2} % (pcd); band 0: {} / {}",

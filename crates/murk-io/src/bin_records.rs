@@ -103,7 +103,10 @@ fn undeclared_layout(bytes: &[u8], source: &Path) -> Result<BinLayout, IoError> 
         fits: fits.to_string(),
         why,
     };
-    match (size % KITTI_RECORD == 0, size % NUSCENES_RECORD == 0) {
+    match (
+        size.is_multiple_of(KITTI_RECORD),
+        size.is_multiple_of(NUSCENES_RECORD),
+    ) {
         (true, false) => Ok(BinLayout::Xyzi),
         (false, false) => Err(IoError::TrailingBytes {
             path: source.to_path_buf(),

@@ -459,7 +459,7 @@ fn parse_pcd_data(
         reason,
     };
     match h.data {
-        PcdData::Ascii => parse_ascii(source, &h, &want, data, lookup.as_ref(), scale),
+        PcdData::Ascii => parse_ascii(source, h, want, data, lookup.as_ref(), scale),
         PcdData::Binary => {
             let step: usize = h.fields.iter().map(PcdField::bytes).sum();
             let need = n.checked_mul(step);
