@@ -3,14 +3,14 @@
 //! A thin layer over the library crates' public APIs — murk-io's readers and
 //! writers, murk-types' [`CoefficientTable`], murk-infer's
 //! [`ApplyParams`] → [`murk_infer::Applier`], murk-fit's
-//! [`FitParams`] → `fit`, murk-diagnose's `run` — with numpy arrays in and
+//! [`murk_fit::FitParams`] → `fit`, murk-diagnose's `run` — with numpy arrays in and
 //! out. The Python side (`python/murk/__init__.py`) re-exports these names
 //! and adds `Augment`; `python/murk/__init__.pyi` documents every signature.
 //!
 //! - The GIL is released while murk works (`Python::detach`), and the work
-//!   runs on a rayon pool owned by [`pool`] (safe after `fork`).
+//!   runs on a rayon pool owned by the `pool` module (safe after `fork`).
 //! - Errors are `murk.MurkError` subclasses with the CLI's messages
-//!   ([`errors`]).
+//!   (the `errors` module).
 //! - `apply` on a scan gives the bytes `murk apply` writes for the same scan
 //!   with the same seed when `key` is the CLI's scan key (the file's path
 //!   relative to the input argument: its name for a file argument).

@@ -30,7 +30,7 @@ use serde::{Deserialize, Serialize};
 /// `π/√3`: the scale that gives the logistic distribution unit variance.
 pub const LOGISTIC_UNIT: f64 = PI / 1.732_050_807_568_877_2;
 
-/// Shape of the soft survival edge (see the [module docs](self)).
+/// Shape of the soft survival edge (see the module docs of `murk_types::edge`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum EdgeShape {
