@@ -191,7 +191,7 @@ fn fit_inputs(inputs: &FitInputs, params: &FitValidParams) -> Result<FittedTable
             loo,
             params.bootstrap_replicates(),
             params.seed(),
-            0,
+            "lidar/clear",
         )
         .map(uncertainty),
         no_change_rate_reason: clear_rate
@@ -300,7 +300,7 @@ fn radar(
     };
     let (reference, baseline) =
         RadarReference::build(&clear_det, tol, params.radar_min_presence()).map_err(radar_err)?;
-    for (ci, class) in WeatherClass::ALL.into_iter().enumerate() {
+    for class in WeatherClass::ALL {
         let rows: Vec<(u64, u64)> = if class == WeatherClass::Clear {
             if clear_idx.len() < 2 {
                 out.absent.insert(
@@ -342,7 +342,7 @@ fn radar(
             &rows,
             params.bootstrap_replicates(),
             params.seed(),
-            100 + ci as u64,
+            &format!("radar/{}", class.name()),
         ) {
             out.uncertainty.insert(class, uncertainty(u));
         }

@@ -495,7 +495,7 @@ pub fn weather(
         &rows,
         p.bootstrap_replicates(),
         p.seed(),
-        cx.class as u64 + 1,
+        &format!("lidar/{}", cx.class.name()),
     )
     .map(uncertainty);
 
@@ -528,7 +528,7 @@ pub fn weather(
         quantile: p.quantile(),
         mor_bins: all_q.iter().map(to_mor_bin).collect(),
         survival: ml.as_ref().map(|m| SurvivalFit {
-            edge: p.edge().name().to_string(),
+            edge: p.edge(),
             dropout: m.dropout,
             dropout_clear: cx.dropout_clear,
             residual: m.residual,

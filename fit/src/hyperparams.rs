@@ -6,44 +6,19 @@ use serde::Serialize;
 
 use crate::FitError;
 
-/// Shape of the soft survival edge `F` in
-/// `P(kept) = π + (1 − ε − π)(1 − F((r − s·M)/(w·s·M)))`.
-///
-/// Both shapes are scaled to unit standard deviation, so the edge width `w`
-/// means the same thing (the edge's standard deviation relative to the
-/// vanishing distance) whichever is chosen.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum EdgeShape {
-    /// Standard normal CDF.
-    Probit,
-    /// Logistic CDF with unit variance (`1 / (1 + exp(−z·π/√3))`).
-    Logistic,
-}
+/// Shape of the soft survival edge: the shared definition of murk-types
+/// (both shapes at unit variance, so the edge width means the same thing
+/// whichever is chosen).
+pub use murk_types::EdgeShape;
 
-impl EdgeShape {
-    /// Lower-case name as written in the table.
-    pub fn name(self) -> &'static str {
-        match self {
-            EdgeShape::Probit => "probit",
-            EdgeShape::Logistic => "logistic",
-        }
-    }
-}
-
-impl std::str::FromStr for EdgeShape {
-    type Err = FitError;
-    fn from_str(s: &str) -> Result<Self, FitError> {
-        match s.to_ascii_lowercase().as_str() {
-            "probit" | "normal" => Ok(EdgeShape::Probit),
-            "logistic" | "logit" => Ok(EdgeShape::Logistic),
-            _ => Err(FitError::InvalidParam {
-                name: "edge",
-                value: s.to_string(),
-                reason: "expected probit or logistic".into(),
-            }),
-        }
-    }
+/// Parses the `edge` parameter (`probit`/`normal`, `logistic`/`logit`).
+pub fn parse_edge(s: &str) -> Result<EdgeShape, FitError> {
+    s.parse::<EdgeShape>()
+        .map_err(|reason| FitError::InvalidParam {
+            name: "edge",
+            value: s.to_string(),
+            reason,
+        })
 }
 
 /// A reflectivity band `[min, max)`; `max = None` is unbounded.

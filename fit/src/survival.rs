@@ -7,7 +7,8 @@
 //! P(kept | r, MOR, band b) = π + (1 − ε − π) · (1 − F((u − s_b) / (w_b · s_b))),   u = r / (MOR · ρ)
 //! ```
 //!
-//! with `F` a unit-variance CDF ([`EdgeShape`]), `s_b` the vanishing slope of
+//! with `F` a unit-variance CDF ([`EdgeShape`], murk-types' one definition
+//! of the edge law, which infer applies), `s_b` the vanishing slope of
 //! reflectivity band `b`, `w_b` the relative edge width, `ε` the dropout of
 //! returns well inside the vanishing distance and `π` the residual survival of
 //! returns far beyond it (retro-reflectors, chance pairings).
@@ -29,7 +30,7 @@
 use std::ops::Range;
 
 use crate::hyperparams::{Band, EdgeShape};
-use crate::stats::dist::{logistic_sf, logit, normal_cdf, normal_sf, sigmoid};
+use crate::stats::dist::{logit, sigmoid};
 use crate::stats::optim::{INVALID, hessian, invert, minimize};
 
 /// Reflectivity classes: the finest partition made of every band edge in use
@@ -208,13 +209,10 @@ pub struct SurvivalResult {
     pub trials: u64,
 }
 
+/// `(1 − F(z), F(z))` of the shared edge law, each accurate in its own tail.
 #[inline]
 fn tails(edge: EdgeShape, z: f64) -> (f64, f64) {
-    // (1 − F(z), F(z)), each accurate in its own tail.
-    match edge {
-        EdgeShape::Probit => (normal_sf(z), normal_cdf(z)),
-        EdgeShape::Logistic => (logistic_sf(z), logistic_sf(-z)),
-    }
+    edge.tails(z)
 }
 
 /// Negative log-likelihood of one band's observations.

@@ -18,141 +18,16 @@
 //! its range and reflectivity, and the output keeps the input's order,
 //! intensity scale and time column.
 
-use murk_types::{LidarSpec, NoiseLaw, PointCloud, SurvivalFit, WeatherClass};
-use serde::Serialize;
+use murk_types::{EdgeShape, LidarSpec, PointCloud, WeatherClass};
 
 use crate::error::InferError;
-use crate::hyperparams::SlopeSource;
 use crate::kernel::{self, Hard};
+use crate::model::{
+    BandRule, BandSummaryRule, ModelSummary, NearLaw, RainUse, SlopeSource, SoftEdge,
+};
 use crate::near::{NearSettings, add_near_range};
-use crate::sampling::{ScanSeed, TruncNormal};
+use crate::sampling::ScanSeed;
 use crate::summary::ApplySummary;
-
-/// One reflectivity band of the applied model.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-#[non_exhaustive]
-pub struct BandRule {
-    /// Lower edge (inclusive), calibrated reflectivity.
-    pub reflectivity_min: f64,
-    /// Upper edge (exclusive); `None` when unbounded.
-    pub reflectivity_max: Option<f64>,
-    /// Vanishing slope of the band (NaN only for an identity model built on
-    /// a band without slope).
-    pub slope: f64,
-    /// `slope × MOR × range_scale`, metres (infinite for the identity).
-    pub vanishing_distance_m: f64,
-    /// Relative soft-edge width, when the table has it.
-    pub edge_width: Option<f64>,
-}
-
-/// The CDF of the survival edge.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "lowercase")]
-pub(crate) enum EdgeLaw {
-    Probit,
-    Logistic,
-}
-
-/// The fitted survival edge.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub(crate) struct SoftEdge {
-    pub edge: EdgeLaw,
-    pub dropout: f64,
-    pub residual: f64,
-    /// `1 / (1 − dropout_clear)`: the input is a clear recording that
-    /// already lost its clear-weather dropout, so survival is conditioned on
-    /// being present in it.
-    pub clear_factor: f64,
-}
-
-impl SoftEdge {
-    pub(crate) fn new(s: &SurvivalFit) -> Result<SoftEdge, String> {
-        let edge = match s.edge.as_str() {
-            "probit" => EdgeLaw::Probit,
-            "logistic" => EdgeLaw::Logistic,
-            other => return Err(format!("edge {other:?} is not probit or logistic")),
-        };
-        if s.dropout + s.residual > 1.0 {
-            return Err(format!(
-                "dropout {} + residual {} exceed 1",
-                s.dropout, s.residual
-            ));
-        }
-        let clear = s.dropout_clear.unwrap_or(0.0);
-        if !(0.0..1.0).contains(&clear) {
-            return Err(format!("dropout_clear {clear} is not in [0, 1)"));
-        }
-        Ok(SoftEdge {
-            edge,
-            dropout: s.dropout,
-            residual: s.residual,
-            clear_factor: 1.0 / (1.0 - clear),
-        })
-    }
-
-    /// `P(kept)` given the edge CDF value `f` at the point's range.
-    #[inline]
-    pub(crate) fn keep_probability(&self, f: f64) -> f64 {
-        let p = self.residual + (1.0 - self.dropout - self.residual) * (1.0 - f);
-        (p * self.clear_factor).min(1.0)
-    }
-}
-
-/// Largest expected near-range count per scan accepted.
-const MAX_EXPECTED_NEAR: f64 = 1e8;
-
-/// A ghost or ring law evaluated at the applied MOR.
-#[derive(Debug, Clone, PartialEq)]
-pub(crate) struct NearLaw {
-    pub expected: f64,
-    pub count_source: &'static str,
-    pub distance: TruncNormal,
-    pub reflectivity: TruncNormal,
-}
-
-impl NearLaw {
-    pub(crate) fn new(l: &NoiseLaw, mor: f64, count_scale: f64) -> Result<NearLaw, String> {
-        let (base, count_source) = match &l.count_law {
-            Some(c) => (c.expected(mor), "count_law"),
-            None => (l.points_per_scan, "points_per_scan"),
-        };
-        let expected = base * count_scale;
-        if !(expected.is_finite() && (0.0..=MAX_EXPECTED_NEAR).contains(&expected)) {
-            return Err(format!(
-                "expected count {expected} per scan at MOR {mor} m (from {count_source}) is not in [0, {MAX_EXPECTED_NEAR}]"
-            ));
-        }
-        let dlo = l.distance_m.lower.unwrap_or(0.0).max(0.0);
-        let dhi = l.distance_m.upper.unwrap_or(f64::INFINITY);
-        // Calibrated reflectivity lives in [0, 255].
-        let rlo = l.reflectivity.lower.unwrap_or(0.0).max(0.0);
-        let rhi = l.reflectivity.upper.unwrap_or(255.0).min(255.0);
-        if dlo >= dhi {
-            return Err(format!(
-                "distance_m truncation [{dlo}, {dhi}] m is empty (ranges are > 0)"
-            ));
-        }
-        if rlo >= rhi {
-            return Err(format!(
-                "reflectivity truncation [{rlo}, {rhi}] is empty (calibrated reflectivity lies in [0, 255])"
-            ));
-        }
-        Ok(NearLaw {
-            expected,
-            count_source,
-            distance: TruncNormal::new(l.distance_m.mean, l.distance_m.std, dlo, dhi),
-            reflectivity: TruncNormal::new(l.reflectivity.mean, l.reflectivity.std, rlo, rhi),
-        })
-    }
-}
-
-/// How a rain rate became the applied MOR.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub(crate) struct RainUse {
-    pub requested_mm_h: f64,
-    pub used_mm_h: f64,
-    pub warning: Option<String>,
-}
 
 /// A weather model checked against a coefficient table: applies one
 /// weather at one MOR to any number of scans.
@@ -181,62 +56,6 @@ pub struct Applier {
     pub(crate) warnings: Vec<String>,
     pub(crate) extensions: Vec<murk_types::ModelExtension>,
     pub(crate) scan_covariates: std::collections::BTreeMap<String, murk_types::CovariateValue>,
-}
-
-/// A serialisable description of an [`Applier`]: what was applied.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-#[non_exhaustive]
-pub struct ModelSummary {
-    /// The weather.
-    pub weather: WeatherClass,
-    /// The applied MOR, metres (null for a rain rate of 0).
-    pub mor_m: Option<f64>,
-    /// The rain rate asked for, mm/h (rain given as a rate only).
-    pub rain_rate_requested_mm_h: Option<f64>,
-    /// The rain rate converted (differs from the request after a clamp).
-    pub rain_rate_used_mm_h: Option<f64>,
-    /// True when applying is the identity.
-    pub identity: bool,
-    /// The clear-weather MOR threshold, metres.
-    pub clear_mor_threshold_m: f64,
-    /// Range-scale coefficient of the target sensor.
-    pub range_scale: f64,
-    /// `vanishing_slope` or `vanishing_slope_q99`.
-    pub slope_field: &'static str,
-    /// `hard`, `soft-probit` or `soft-logistic`.
-    pub vanishing: &'static str,
-    /// Near-range returns on.
-    pub near_range: bool,
-    /// σ of the range noise, metres (null when off).
-    pub range_noise_m: Option<f64>,
-    /// α of the intensity attenuation, 1/m (null when off).
-    pub attenuation_alpha_per_m: Option<f64>,
-    /// Master seed.
-    pub seed: u64,
-    /// The bands applied.
-    pub bands: Vec<BandSummaryRule>,
-    /// Warnings raised while checking the parameters.
-    pub warnings: Vec<String>,
-    /// Extension terms applied (from `murk diagnose`), empty for a plain table.
-    #[serde(skip_serializing_if = "Vec::is_empty")]
-    pub extensions: Vec<murk_types::ModelExtension>,
-    /// Scan-level covariate values supplied for the extension terms.
-    #[serde(skip_serializing_if = "std::collections::BTreeMap::is_empty")]
-    pub covariates: std::collections::BTreeMap<String, murk_types::CovariateValue>,
-}
-
-/// One band of a [`ModelSummary`] (finite numbers or null, for JSON).
-#[derive(Debug, Clone, PartialEq, Serialize)]
-#[non_exhaustive]
-pub struct BandSummaryRule {
-    /// Lower edge (inclusive).
-    pub reflectivity_min: f64,
-    /// Upper edge (exclusive); null when unbounded.
-    pub reflectivity_max: Option<f64>,
-    /// Slope (null when the table has none and the model is the identity).
-    pub slope: Option<f64>,
-    /// Vanishing distance, metres (null for the identity).
-    pub vanishing_distance_m: Option<f64>,
 }
 
 fn finite(x: f64) -> Option<f64> {
@@ -294,8 +113,8 @@ impl Applier {
             slope_field: self.slope_source.field(),
             vanishing: match self.soft.map(|s| s.edge) {
                 None => "hard",
-                Some(EdgeLaw::Probit) => "soft-probit",
-                Some(EdgeLaw::Logistic) => "soft-logistic",
+                Some(EdgeShape::Probit) => "soft-probit",
+                Some(EdgeShape::Logistic) => "soft-logistic",
             },
             near_range: self.near_range,
             range_noise_m: (self.range_noise_m > 0.0).then_some(self.range_noise_m),
@@ -428,6 +247,23 @@ impl Applier {
         mask: &mut Vec<u8>,
         want_cloud: bool,
     ) -> Result<(Option<PointCloud>, ApplySummary), InferError> {
+        self.apply_marked(cloud, key, mask, want_cloud, &mut Vec::new())
+    }
+
+    /// [`Applier::apply_masked`], also giving in `replaced` the indices of
+    /// the output (ascending, kept points only) whose point a near-range
+    /// return replaced: the point there is a fog or rain echo on the
+    /// original's ray, not the original return, so a writer that carries a
+    /// row's other cells (labels, colours) leaves them empty for it.
+    pub fn apply_marked(
+        &self,
+        cloud: &PointCloud,
+        key: &str,
+        mask: &mut Vec<u8>,
+        want_cloud: bool,
+        replaced: &mut Vec<usize>,
+    ) -> Result<(Option<PointCloud>, ApplySummary), InferError> {
+        replaced.clear();
         Self::check_cloud(cloud, key)?;
         let mut summary = ApplySummary::empty(key, &self.bands);
         summary.points_in = cloud.len() as u64;
@@ -473,6 +309,7 @@ impl Applier {
             b.vanished = n - kept;
         }
         summary.below_bands = counts.below();
+        summary.below_bands_vanished = counts.below_vanished();
         summary.above_bands = counts.above;
         if !want_cloud && !self.changes_points() {
             summary.points_out = counts.kept;
@@ -496,9 +333,9 @@ impl Applier {
                 cloud,
                 &mut out,
                 (self.ghost.as_ref(), self.ring.as_ref()),
-                seed,
-                key,
+                (seed, key),
                 &mut summary,
+                replaced,
             )?;
         }
         summary.points_out = out.len() as u64;
@@ -512,9 +349,9 @@ impl Applier {
         cloud: &PointCloud,
         out: &mut PointCloud,
         laws: (Option<&NearLaw>, Option<&NearLaw>),
-        seed: ScanSeed,
-        key: &str,
+        (seed, key): (ScanSeed, &str),
         summary: &mut ApplySummary,
+        replaced: &mut Vec<usize>,
     ) -> Result<(), InferError> {
         let settings = NearSettings {
             ghost: laws.0,
@@ -522,7 +359,15 @@ impl Applier {
             lidar: self.lidar.as_ref(),
             azimuth_resolution_deg: self.azimuth_resolution_deg,
         };
-        let (g, r) = add_near_range(cloud, out, &settings, seed, key, &mut summary.warnings)?;
+        let (g, r) = add_near_range(
+            cloud,
+            out,
+            &settings,
+            seed,
+            key,
+            &mut summary.warnings,
+            replaced,
+        )?;
         summary.ghost = g;
         summary.ring = r;
         Ok(())

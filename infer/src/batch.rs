@@ -15,11 +15,25 @@
 //!   scan's output does not depend on where the batch lives or what else is
 //!   in it.
 //! - Same format in and out: intensities are written in the input's scale,
-//!   untouched points bit for bit. CSV to CSV goes further (see
+//!   untouched points bit for bit (a PCD output records a scale other than
+//!   calibrated in its header, see `murk_io`). CSV to CSV goes further (see
 //!   [`run_job`]): kept rows are copied byte for byte, header and extra
-//!   columns included. Another format: intensities are converted
-//!   to the output format's default scale, so that reading the output with
+//!   columns included. Another format, and every KITTI `.bin` output
+//!   (always `xyzi`, 0–1): intensities are converted to the scale
+//!   [`murk_io::portable_scale`] names, so that reading the output with
 //!   default options gives the same reflectivities.
+//! - A `.pcap` capture is applied **per revolution**: its output is a folder
+//!   `<stem>/` of `frame-000001.<ext>`, `frame-000002.<ext>`, … (as `murk
+//!   convert` names them), one scan each, seeded by its own key
+//!   `<stem>/frame-000001.<ext>`. Partial first and last revolutions (not a
+//!   full 360°) are left out and said so in the warnings unless
+//!   [`BatchOptions::keep_partial`]: a scan with a missing wedge would be
+//!   read as a whole revolution downstream. Packets that are not the
+//!   sensor's are skipped and counted in the warnings; a capture cut short
+//!   keeps the revolutions before the cut.
+//! - Each [`FileReport`] says in which intensity scale its input was read
+//!   and whether that scale was declared, recorded in the file or assumed,
+//!   and which of the input's fields the output does not carry.
 
 use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
@@ -29,8 +43,9 @@ use murk_types::{PointCloud, PointFormat, StagedFile};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::applier::{Applier, ModelSummary};
+use crate::applier::Applier;
 use crate::error::InferError;
+use crate::model::ModelSummary;
 use crate::summary::{ApplySummary, SUMMARY_FORMAT};
 
 /// One input file and where its output goes.
@@ -81,6 +96,9 @@ pub struct BatchOptions {
     pub format: Option<PointFormat>,
     /// PCD `DATA` encoding of PCD outputs.
     pub pcd_data: PcdData,
+    /// Also apply to (and write) the partial first and last revolutions of
+    /// a `.pcap` capture.
+    pub keep_partial: bool,
 }
 
 /// One processed file.
@@ -93,6 +111,19 @@ pub struct FileReport {
     pub output: PathBuf,
     /// What applying did.
     pub summary: ApplySummary,
+    /// The intensity scale the input was read in (`kitti`, `calibrated`, …).
+    pub intensity_scale: String,
+    /// Where that scale came from (`declared`, `recorded in the file`,
+    /// `assumed (format default)`).
+    pub intensity_scale_source: &'static str,
+    /// Fields of the input the output does not have (a PCD's `rgb`, a
+    /// CSV's extra columns written to another format).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub dropped_fields: Vec<String>,
+    /// True for a partial revolution of a capture (kept with
+    /// [`BatchOptions::keep_partial`]).
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub partial: bool,
 }
 
 /// The report of a batch (`murk-apply-summary/1`).
@@ -103,7 +134,8 @@ pub struct BatchReport {
     pub format: &'static str,
     /// What was applied.
     pub model: ModelSummary,
-    /// Counts summed over every file.
+    /// Counts summed over every file; its `warnings` are the scans' own, in
+    /// plan order (the model's are in `model.warnings`, once).
     pub totals: ApplySummary,
     /// Per file, in plan order.
     pub files: Vec<FileReport>,
@@ -229,7 +261,14 @@ pub fn plan(inputs: &[PathBuf], out_dir: &Path, opts: &BatchOptions) -> Result<P
                 ),
             });
         }
-        let key = if format_out == format_in && opts.format.is_none() {
+        let key = if format_in == PointFormat::Pcap {
+            // A folder of frames.
+            let (dir, name) = match key.rsplit_once('/') {
+                Some((d, n)) => (format!("{d}/"), n.to_string()),
+                None => (String::new(), key.clone()),
+            };
+            format!("{dir}{}", stem_of(&name, format_in))
+        } else if format_out == format_in && opts.format.is_none() {
             key
         } else {
             let (dir, name) = match key.rsplit_once('/') {
@@ -280,7 +319,16 @@ pub fn plan(inputs: &[PathBuf], out_dir: &Path, opts: &BatchOptions) -> Result<P
             });
         }
     }
-    let dirs: HashSet<&Path> = jobs.iter().filter_map(|j| j.output.parent()).collect();
+    let dirs: HashSet<&Path> = jobs
+        .iter()
+        .filter_map(|j| {
+            if j.format_in == PointFormat::Pcap {
+                Some(j.output.as_path())
+            } else {
+                j.output.parent()
+            }
+        })
+        .collect();
     for d in dirs {
         std::fs::create_dir_all(d).map_err(|source| InferError::Fs {
             path: d.to_path_buf(),
@@ -307,23 +355,29 @@ pub fn plan(inputs: &[PathBuf], out_dir: &Path, opts: &BatchOptions) -> Result<P
 /// murk does not know. Cells of columns the model does not use are copied,
 /// not checked. Files with quoted data cells take the general path (read,
 /// apply, write `x,y,z,intensity,ring[,time]`).
+///
+/// A `.pcap` job gives one report per revolution written (see the module
+/// docs); every other job one.
 pub fn run_job(
     applier: &Applier,
     job: &Job,
     opts: &BatchOptions,
-) -> Result<FileReport, InferError> {
-    let (report, staged) = stage_job(applier, job, opts)?;
-    commit(staged)?;
-    Ok(report)
+) -> Result<Vec<FileReport>, InferError> {
+    let mut reports = Vec::new();
+    for (report, staged) in stage_job(applier, job, opts)? {
+        commit(staged)?;
+        reports.push(report);
+    }
+    Ok(reports)
 }
 
-/// [`run_job`] up to the output's temporary file: the report and the staged
-/// output, which [`commit`] syncs and renames into place.
+/// [`run_job`] up to the outputs' temporary files: the reports and the
+/// staged outputs, which [`commit`] syncs and renames into place.
 fn stage_job(
     applier: &Applier,
     job: &Job,
     opts: &BatchOptions,
-) -> Result<(FileReport, StagedFile), InferError> {
+) -> Result<Vec<(FileReport, StagedFile)>, InferError> {
     let mut read = opts.read.clone();
     read.format = Some(job.format_in);
     if job.format_in == PointFormat::Csv
@@ -331,27 +385,114 @@ fn stage_job(
         && (applier.identity || applier.extensions.is_empty())
         && let Some(staged) = stage_csv_rows(applier, job, &read)?
     {
-        return Ok(staged);
+        return Ok(vec![staged]);
     }
-    let cloud = murk_io::read_cloud(&job.input, &read)?;
-    let (mut out, summary) = applier.apply(&cloud, &job.key)?;
-    drop(cloud);
-    if job.format_out != job.format_in {
-        out.to_scale(job.format_out.default_intensity_scale());
+    if job.format_in == PointFormat::Pcap {
+        return stage_capture(applier, job, opts, &read);
+    }
+    let (cloud, notes) = murk_io::read_cloud_noted(&job.input, &read)?;
+    let staged = stage_scan(
+        applier,
+        job,
+        opts,
+        &cloud,
+        &notes,
+        &job.key,
+        &job.output,
+        false,
+    )?;
+    Ok(vec![staged])
+}
+
+/// Applies the model to one scan and stages its output at `output`.
+#[allow(clippy::too_many_arguments)]
+fn stage_scan(
+    applier: &Applier,
+    job: &Job,
+    opts: &BatchOptions,
+    cloud: &PointCloud,
+    notes: &murk_io::ReadNotes,
+    key: &str,
+    output: &Path,
+    partial: bool,
+) -> Result<(FileReport, StagedFile), InferError> {
+    let (mut out, mut summary) = applier.apply(cloud, key)?;
+    if job.format_out != job.format_in || job.format_out == PointFormat::KittiBin {
+        out.to_scale(murk_io::portable_scale(job.format_out, out.intensity_scale));
     }
     let w = WriteOptions {
         format: job.format_out,
         pcd_data: opts.pcd_data,
     };
-    let staged = murk_io::stage_cloud_with(&job.output, &out, &w)?;
+    let staged = murk_io::stage_cloud_with(output, &out, &w)?;
+    summary.warnings.extend(notes.warnings.iter().cloned());
+    if !notes.dropped_fields.is_empty() {
+        summary.warnings.push(format!(
+            "{}: fields {} are not carried into {} (murk's clouds hold x, y, z, intensity, ring and time)",
+            job.input.display(),
+            notes.dropped_fields.join(", "),
+            output.display()
+        ));
+    }
     Ok((
         FileReport {
             input: job.input.clone(),
-            output: job.output.clone(),
+            output: output.to_path_buf(),
             summary,
+            intensity_scale: cloud.intensity_scale.describe(),
+            intensity_scale_source: notes.scale_source.describe(),
+            dropped_fields: notes.dropped_fields.clone(),
+            partial,
         },
         staged,
     ))
+}
+
+/// A capture, applied per revolution (see the module docs).
+fn stage_capture(
+    applier: &Applier,
+    job: &Job,
+    opts: &BatchOptions,
+    read: &ReadOptions,
+) -> Result<Vec<(FileReport, StagedFile)>, InferError> {
+    let frames = murk_io::read_frames_noted(&job.input, read)?;
+    let ext = job.format_out.extension();
+    let mut staged = Vec::with_capacity(frames.clouds.len());
+    let mut dropped = Vec::new();
+    let mut notes = frames.notes.clone();
+    for (k, (cloud, &partial)) in frames.clouds.iter().zip(&frames.partial).enumerate() {
+        let name = format!("frame-{:06}.{ext}", k + 1);
+        if partial && !opts.keep_partial {
+            dropped.push(format!("{name} ({} points)", cloud.len()));
+            continue;
+        }
+        let key = format!("{}/{name}", job.key);
+        let output = job.output.join(&name);
+        staged.push(stage_scan(
+            applier, job, opts, cloud, &notes, &key, &output, partial,
+        )?);
+        // The capture's notes go with its first output only.
+        notes.warnings.clear();
+    }
+    if !dropped.is_empty() {
+        let warning = format!(
+            "{}: left out {} partial revolution{} (not a full 360°): {}; --keep-partial applies to them too",
+            job.input.display(),
+            dropped.len(),
+            if dropped.len() == 1 { "" } else { "s" },
+            dropped.join(", ")
+        );
+        match staged.first_mut() {
+            Some((report, _)) => report.summary.warnings.push(warning),
+            None => {
+                return Err(InferError::Input {
+                    path: job.input.clone(),
+                    reason: format!("{warning}, and it holds no full one"),
+                });
+            }
+        }
+    }
+    Ok(staged)
 }
 
 /// Syncs a staged output and renames it into place.
@@ -378,9 +519,11 @@ fn stage_csv_rows(
             return Ok(None);
         };
         let mut mask = Vec::new();
-        let (out, summary) = applier.apply_masked(&rows.cloud, &job.key, &mut mask, false)?;
+        let mut replaced = Vec::new();
+        let (out, summary) =
+            applier.apply_marked(&rows.cloud, &job.key, &mut mask, false, &mut replaced)?;
         let (edits, added) = match &out {
-            Some(out) => changed_rows(&rows.cloud, &mask, out),
+            Some(out) => changed_rows(&rows.cloud, &mask, out, &replaced),
             None => (Vec::new(), None),
         };
         let staged = murk_types::stage_atomic_with(&job.output, |w| {
@@ -389,12 +532,21 @@ fn stage_csv_rows(
         .map_err(fs_error(&job.output))?;
         Ok::<_, InferError>(Some((summary, staged)))
     })??;
+    let source = if read.declared_scale().is_some() {
+        murk_io::ScaleSource::Declared
+    } else {
+        murk_io::ScaleSource::Default
+    };
     Ok(staged.map(|(summary, staged)| {
         (
             FileReport {
                 input: job.input.clone(),
                 output: job.output.clone(),
                 summary,
+                intensity_scale: read.scale_for(PointFormat::Csv).describe(),
+                intensity_scale_source: source.describe(),
+                dropped_fields: Vec::new(),
+                partial: false,
             },
             staged,
         )
@@ -402,28 +554,38 @@ fn stage_csv_rows(
 }
 
 /// The kept input points whose x, y, z or intensity `out` changed (bit
-/// comparison), and the points `out` adds after the kept ones.
+/// comparison), and the points `out` adds after the kept ones. `replaced`
+/// (ascending output indices) marks the kept points a near-range return
+/// replaced: their rows are fresh points ([`RowEdit::fresh`]).
 fn changed_rows(
     input: &PointCloud,
     mask: &[u8],
     out: &PointCloud,
+    replaced: &[usize],
 ) -> (Vec<RowEdit>, Option<PointCloud>) {
     let mut edits = Vec::new();
     let mut j = 0usize;
+    let mut r = 0usize;
     for (i, &m) in mask.iter().enumerate() {
         if m == 0 {
             continue;
         }
+        let fresh = r < replaced.len() && replaced[r] == j;
+        if fresh {
+            r += 1;
+        }
         let new = [out.x[j], out.y[j], out.z[j], out.intensity[j]];
         let old = [input.x[i], input.y[i], input.z[i], input.intensity[i]];
-        if new
-            .iter()
-            .zip(&old)
-            .any(|(a, b)| a.to_bits() != b.to_bits())
+        if fresh
+            || new
+                .iter()
+                .zip(&old)
+                .any(|(a, b)| a.to_bits() != b.to_bits())
         {
             edits.push(RowEdit {
                 row: i,
                 values: new,
+                fresh,
             });
         }
         j += 1;
@@ -490,7 +652,8 @@ pub fn run_until(
     let n = plan.jobs.len();
     // Jobs never started because of `stop`.
     let not_started = std::sync::atomic::AtomicUsize::new(0);
-    let (tx, rx) = std::sync::mpsc::sync_channel::<(usize, FileReport, StagedFile)>(STAGED_MAX);
+    type Staged = Vec<(FileReport, StagedFile)>;
+    let (tx, rx) = std::sync::mpsc::sync_channel::<(usize, Staged)>(STAGED_MAX);
     // Shared by the committers only: when the last of them ends (even by a
     // panic), the receiver goes and a worker's send fails instead of
     // waiting forever.
@@ -504,12 +667,24 @@ pub fn run_until(
                     loop {
                         // The lock is held only to take the next file.
                         let next = rx.lock().unwrap_or_else(|p| p.into_inner()).recv();
-                        let Ok((i, report, staged)) = next else {
+                        let Ok((i, outputs)) = next else {
                             break;
                         };
-                        let r = commit(staged).map(|()| {
-                            progress(&report);
-                            report
+                        let mut reports = Vec::with_capacity(outputs.len());
+                        let mut r = Ok(());
+                        for (report, staged) in outputs {
+                            // After a failure the rest are dropped (their
+                            // temporary files removed), not committed.
+                            if r.is_ok() {
+                                r = commit(staged);
+                                reports.push(report);
+                            }
+                        }
+                        let r = r.map(|()| {
+                            if let Some(last) = reports.last() {
+                                progress(last);
+                            }
+                            reports
                         });
                         done.push((i, r));
                     }
@@ -529,27 +704,27 @@ pub fn run_until(
                 }
                 match stage_job(applier, j, opts) {
                     // A send fails only when every committer is gone (a panic,
-                    // re-raised below); the temporary file is then dropped.
-                    Ok((report, staged)) => tx
-                        .send((i, report, staged))
+                    // re-raised below); the temporary files are then dropped.
+                    Ok(outputs) => tx
+                        .send((i, outputs))
                         .err()
                         .map(|_| InferError::Conflict("the committing threads stopped".into())),
                     Err(e) => Some(e),
                 }
             })
             .collect();
-        let committed: Vec<(usize, Result<FileReport, InferError>)> = committers
+        let committed: Vec<(usize, Result<Vec<FileReport>, InferError>)> = committers
             .into_iter()
             .flat_map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
             .collect();
         (staged, committed)
     });
-    let mut results: Vec<Option<Result<FileReport, InferError>>> =
+    let mut results: Vec<Option<Result<Vec<FileReport>, InferError>>> =
         staged.into_iter().map(|e| e.map(Err)).collect();
     for (i, r) in committed {
         results[i] = Some(r);
     }
-    let results: Vec<Result<FileReport, InferError>> = results
+    let results: Vec<Result<Vec<FileReport>, InferError>> = results
         .into_iter()
         .map(|r| r.expect("every job is staged or failed"))
         .collect();
@@ -559,16 +734,13 @@ pub fn run_until(
     }
     let mut files = Vec::with_capacity(results.len());
     for r in results {
-        files.push(r?);
+        files.extend(r?);
     }
     let mut totals = ApplySummary::empty("total", applier.bands());
     totals.identity = applier.is_identity();
     for f in &files {
         totals.add(&f.summary);
     }
-    totals
-        .warnings
-        .splice(0..0, applier.warnings().iter().cloned());
     Ok(BatchReport {
         format: SUMMARY_FORMAT,
         model: applier.describe(),

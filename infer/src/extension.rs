@@ -28,9 +28,9 @@ use rand::RngExt;
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 
-use crate::applier::{Applier, EdgeLaw};
+use crate::applier::Applier;
 use crate::error::InferError;
-use crate::sampling::{Purpose, ScanSeed, norm_cdf};
+use crate::sampling::{Purpose, ScanSeed};
 use crate::summary::ApplySummary;
 
 /// Points per seeded chunk.
@@ -115,17 +115,11 @@ impl Applier {
                 }
             }
             Some(s) => {
-                let w = b.edge_width.unwrap_or(f64::NAN) * d;
-                let z = (range_m - d) / w;
-                let f = match s.edge {
-                    EdgeLaw::Probit => norm_cdf(z),
-                    EdgeLaw::Logistic => 1.0 / (1.0 + (-z).exp()),
-                };
-                let p = s.residual + (1.0 - s.dropout - s.residual) * (1.0 - f);
+                let z = murk_types::EdgeShape::z(range_m, d, b.edge_width.unwrap_or(f64::NAN));
                 if given_clear_presence {
-                    (p * s.clear_factor).min(1.0)
+                    s.keep_probability_given_clear(z)
                 } else {
-                    p
+                    s.keep_probability(z)
                 }
             }
         }
@@ -163,6 +157,8 @@ impl Applier {
         struct Out {
             keep: bool,
             band: usize,
+            /// Below the lowest band (follows its slope, counted apart).
+            below: bool,
             range_factor: f32,
             intensity: f32,
         }
@@ -203,6 +199,7 @@ impl Applier {
                         Out {
                             keep,
                             band: self.band_index(refl),
+                            below: refl < self.bands[0].reflectivity_min,
                             range_factor,
                             intensity,
                         }
@@ -218,12 +215,18 @@ impl Applier {
             out.time = Some(Vec::with_capacity(n));
         }
         let mut per_band = vec![(0u64, 0u64); self.bands.len()];
+        let (mut below, mut below_kept) = (0u64, 0u64);
         for (i, o) in per_chunk.iter().flatten().enumerate() {
-            per_band[o.band].0 += 1;
+            if o.below {
+                below += 1;
+                below_kept += o.keep as u64;
+            } else {
+                per_band[o.band].0 += 1;
+                per_band[o.band].1 += o.keep as u64;
+            }
             if !o.keep {
                 continue;
             }
-            per_band[o.band].1 += 1;
             let k = o.range_factor;
             out.x.push(cloud.x[i] * k);
             out.y.push(cloud.y[i] * k);
@@ -235,6 +238,8 @@ impl Applier {
             }
         }
         summary.vanished = (n - out.len()) as u64;
+        summary.below_bands = below;
+        summary.below_bands_vanished = below - below_kept;
         for (b, (pts, kept)) in summary.bands.iter_mut().zip(&per_band) {
             b.points_in = *pts;
             b.vanished = pts - kept;
@@ -251,7 +256,7 @@ impl Applier {
             }
         }
         if self.near_range {
-            let scaled = |l: &Option<crate::applier::NearLaw>| {
+            let scaled = |l: &Option<crate::model::NearLaw>| {
                 l.clone().map(|mut l| {
                     l.expected *= count;
                     l
@@ -262,9 +267,9 @@ impl Applier {
                 cloud,
                 &mut out,
                 (ghost.as_ref(), ring.as_ref()),
-                seed,
-                key,
+                (seed, key),
                 &mut summary,
+                &mut Vec::new(),
             )?;
         }
         summary.points_out = out.len() as u64;

@@ -12,12 +12,15 @@ use murk_types::{
     WeatherCoefficients,
 };
 
-use crate::applier::{Applier, BandRule, NearLaw, RainUse, SoftEdge};
+use crate::applier::Applier;
 use crate::error::InferError;
+use crate::model::{BandRule, NearLaw, RainUse, SlopeSource, SoftEdge};
 
 /// The MOR (metres) at and above which the weather is clear and applying is
-/// the identity, when neither the parameters nor the table say otherwise:
-/// the 2000 m of the PDD selection rules (seed report §3.3).
+/// the identity, unless the parameters say otherwise: the 2000 m of the PDD
+/// selection rules (seed report §3.3). The coefficient table does not record
+/// the threshold of the rules it was fitted under (a campaign's custom rules
+/// need not define clear weather by one MOR), so it cannot supply one.
 pub const DEFAULT_CLEAR_MOR_M: f64 = 2000.0;
 
 /// Default azimuth grid (degrees) of near-range rays when no sensor
@@ -35,28 +38,6 @@ pub enum Severity {
     RainRate(f64),
 }
 
-/// Which of the table's slope estimates decides vanishing.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum SlopeSource {
-    /// `vanishing_slope`: the maximum-likelihood edge of the survival
-    /// boundary, "as appliers use it" (the table's own recommendation).
-    #[default]
-    Survival,
-    /// `vanishing_slope_q99`: the seed's estimate (zero-intercept regression
-    /// of the per-MOR 0.99 quantile), to reproduce the seed's model exactly.
-    Quantile,
-}
-
-impl SlopeSource {
-    /// The table field this source reads.
-    pub fn field(self) -> &'static str {
-        match self {
-            SlopeSource::Survival => "vanishing_slope",
-            SlopeSource::Quantile => "vanishing_slope_q99",
-        }
-    }
-}
-
 /// What to apply, before it is checked against a table.
 ///
 /// | Name | Default | Purpose | Range |
@@ -71,7 +52,7 @@ impl SlopeSource {
 /// | `range_noise_m` | 0 (off) | σ of Gaussian noise added to the range of kept returns | ≥ 0, finite |
 /// | `attenuate_intensity` | off | multiply kept intensities by the two-way loss exp(−2·α·r), α = ln(20)/MOR (Koschmieder) | — |
 /// | `clamp_rain_rate` | off | clamp a rain rate outside the conversion's validity into it (with a warning) instead of failing | — |
-/// | `clear_mor_threshold_m` | the table's, else [`DEFAULT_CLEAR_MOR_M`] | MOR at and above which applying is the identity | > 0 |
+/// | `clear_mor_threshold_m` | [`DEFAULT_CLEAR_MOR_M`] | MOR at and above which applying is the identity | > 0 |
 /// | `lidar` | none | sensor description for near-range rays (ring elevations, azimuth grid); none: ring elevations are measured on each scan | a valid [`LidarSpec`] |
 /// | `azimuth_resolution_deg` | `lidar`'s, else [`DEFAULT_AZIMUTH_RESOLUTION_DEG`] | azimuth grid of near-range rays | (0, 45] |
 /// | `seed` | 0 | master seed of every random draw | any |
@@ -241,51 +222,71 @@ impl ApplyParams {
     }
 
     /// [`ApplyParams::build`], naming the table `label` in errors.
+    ///
+    /// The steps: the weather's coefficients, the scalar parameters, the
+    /// severity as a MOR, the band rules, the soft edge, the near-range
+    /// laws and the extension terms; each refuses what it cannot apply.
     pub fn build_labelled(
         &self,
         table: &CoefficientTable,
         label: &str,
     ) -> Result<Applier, InferError> {
-        let invalid = |name: &'static str, value: f64, reason: &str| InferError::InvalidParam {
-            name,
-            value: value.to_string(),
-            reason: reason.to_string(),
-        };
-        let missing = |field: String, reason: String| InferError::MissingCoefficient {
-            table: label.to_string(),
-            field,
-            reason,
-        };
         let w = self.weather;
-        if w == WeatherClass::Clear {
-            return Err(InferError::Conflict(
-                "weather clear is the reference: applying it is the identity; choose fog, rain or snow".into(),
+        let coeffs = weather_coefficients(table, w, label)?;
+        let scalars = self.scalars(table)?;
+        let mut warnings = Vec::new();
+        let (mor, rain) = self.effective_mor(coeffs, label, &mut warnings)?;
+        let identity = mor >= scalars.clear_mor;
+        if !identity
+            && let (Some(lo), Some(hi)) = (coeffs.mor_min_m, coeffs.mor_max_m)
+            && (mor < lo || mor > hi)
+        {
+            warnings.push(format!(
+                "MOR {} m is outside the {}–{} m of the {w} recordings the table was fitted on: the linear vanishing model extrapolates",
+                short_number(mor, Toward::Nearest),
+                short_number(lo, Toward::Nearest),
+                short_number(hi, Toward::Nearest)
             ));
         }
-        let coeffs = table
-            .weathers
-            .get(&w)
-            .ok_or_else(|| InferError::WeatherAbsent {
-                table: label.to_string(),
-                weather: w.to_string(),
-                reason: table
-                    .absent
-                    .get(&w)
-                    .cloned()
-                    .unwrap_or_else(|| "not fitted".into()),
-                available: if table.weathers.is_empty() {
-                    "none".into()
-                } else {
-                    table
-                        .weathers
-                        .keys()
-                        .map(|k| k.name())
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                },
-            })?;
+        let bands = self.band_rules(coeffs, mor, scalars.range_scale, identity, label)?;
+        let soft = if self.soft_edge && !identity {
+            Some(soft_edge(coeffs, w, label)?)
+        } else {
+            None
+        };
+        let (ghost, ring) = if self.near_range && !identity {
+            self.near_laws(coeffs, mor, label, &mut warnings)?
+        } else {
+            (None, None)
+        };
+        let extensions = self.extension_terms(coeffs, identity, label, &mut warnings)?;
 
-        // Scalar parameters.
+        Ok(Applier {
+            weather: w,
+            mor_m: mor,
+            rain,
+            identity,
+            clear_mor_threshold_m: scalars.clear_mor,
+            range_scale: scalars.range_scale,
+            slope_source: self.slope_source,
+            bands,
+            soft,
+            near_range: self.near_range && !identity,
+            ghost,
+            ring,
+            range_noise_m: if identity { 0.0 } else { self.range_noise_m },
+            attenuation_alpha: (self.attenuate_intensity && !identity).then(|| 20f64.ln() / mor),
+            lidar: self.lidar.clone(),
+            azimuth_resolution_deg: scalars.azimuth_resolution_deg,
+            seed: self.seed,
+            warnings,
+            extensions,
+            scan_covariates: self.covariates.clone(),
+        })
+    }
+
+    /// The scalar parameters, checked, with the table's defaults filled in.
+    fn scalars(&self, table: &CoefficientTable) -> Result<Scalars, InferError> {
         let range_scale = self.range_scale.unwrap_or(table.lidar.range_scale);
         if !(range_scale.is_finite() && range_scale > 0.0) {
             return Err(invalid(
@@ -308,10 +309,7 @@ impl ApplyParams {
                 "must be finite and ≥ 0",
             ));
         }
-        let clear_mor = self
-            .clear_mor_threshold_m
-            .or(table_clear_threshold(table))
-            .unwrap_or(DEFAULT_CLEAR_MOR_M);
+        let clear_mor = self.clear_mor_threshold_m.unwrap_or(DEFAULT_CLEAR_MOR_M);
         if !(clear_mor.is_finite() && clear_mor > 0.0) {
             return Err(invalid(
                 "clear_mor_threshold_m",
@@ -342,54 +340,65 @@ impl ApplyParams {
                 "soft_edge uses the survival fit's edge widths, which belong to vanishing_slope: it cannot be combined with slope_source = quantile".into(),
             ));
         }
+        Ok(Scalars {
+            range_scale,
+            clear_mor,
+            azimuth_resolution_deg: az_res,
+        })
+    }
 
-        // Severity → effective MOR.
-        let mut warnings = Vec::new();
-        let (mor, rain) = match self.severity {
+    /// The severity as the applied MOR (a rain rate through the table's
+    /// conversion), with how the rain rate was used.
+    fn effective_mor(
+        &self,
+        coeffs: &WeatherCoefficients,
+        label: &str,
+        warnings: &mut Vec<String>,
+    ) -> Result<(f64, Option<RainUse>), InferError> {
+        match self.severity {
             Severity::Mor(m) => {
                 if !(m.is_finite() && m > 0.0) {
                     return Err(invalid("mor_m", m, "MOR must be finite and > 0 metres"));
                 }
-                (m, None)
+                Ok((m, None))
             }
             Severity::RainRate(r) => {
-                if w != WeatherClass::Rain {
+                if self.weather != WeatherClass::Rain {
                     return Err(InferError::Conflict(format!(
-                        "a rain rate only applies to weather rain, not {w}; give a MOR"
+                        "a rain rate only applies to weather rain, not {}; give a MOR",
+                        self.weather
                     )));
                 }
                 let (m, use_) = rain_to_mor(r, coeffs, self.clamp_rain_rate, label)?;
                 if let Some(wm) = &use_.warning {
                     warnings.push(wm.clone());
                 }
-                (m, Some(use_))
+                Ok((m, Some(use_)))
             }
-        };
-        let identity = mor >= clear_mor;
-
-        if !identity
-            && let (Some(lo), Some(hi)) = (coeffs.mor_min_m, coeffs.mor_max_m)
-            && (mor < lo || mor > hi)
-        {
-            warnings.push(format!(
-                "MOR {} m is outside the {}–{} m of the {w} recordings the table was fitted on: the linear vanishing model extrapolates",
-                short_number(mor, Toward::Nearest),
-                short_number(lo, Toward::Nearest),
-                short_number(hi, Toward::Nearest)
-            ));
         }
+    }
 
-        // Bands.
+    /// The vanishing rule of each band of the chosen slope estimate at
+    /// `mor`.
+    fn band_rules(
+        &self,
+        coeffs: &WeatherCoefficients,
+        mor: f64,
+        range_scale: f64,
+        identity: bool,
+        label: &str,
+    ) -> Result<Vec<BandRule>, InferError> {
         let source = match self.slope_source {
             SlopeSource::Survival => &coeffs.vanishing_slope,
             SlopeSource::Quantile => &coeffs.vanishing_slope_q99,
         };
-        let field = format!("weathers.{w}.{}", self.slope_source.field());
+        let field = format!("weathers.{}.{}", self.weather, self.slope_source.field());
         if source.is_empty() {
-            return Err(missing(field, "has no band".into()));
+            return Err(missing(label, field, "has no band".into()));
         }
         if source.len() > crate::kernel::MAX_BANDS {
             return Err(missing(
+                label,
                 field,
                 format!(
                     "has {} bands; murk-infer applies at most {}",
@@ -405,6 +414,7 @@ impl ApplyParams {
                 None if identity => f64::NAN,
                 None => {
                     return Err(missing(
+                        label,
                         format!("{field}[{i}].slope"),
                         format!(
                             "is null ({}): the band [{}, {}) cannot be applied",
@@ -421,6 +431,7 @@ impl ApplyParams {
                 && b.edge_width.is_none_or(|e| !(e.is_finite() && e > 0.0))
             {
                 return Err(missing(
+                    label,
                     format!("{field}[{i}].edge_width"),
                     "soft_edge needs a finite edge width > 0 in every band".into(),
                 ));
@@ -433,65 +444,77 @@ impl ApplyParams {
                 edge_width: b.edge_width,
             });
         }
+        Ok(bands)
+    }
 
-        let soft = if self.soft_edge && !identity {
-            let s = coeffs.survival.as_ref().ok_or_else(|| {
-                missing(
-                    format!("weathers.{w}.survival"),
-                    "soft_edge needs the survival fit, which this table lacks".into(),
-                )
-            })?;
-            Some(SoftEdge::new(s).map_err(|r| missing(format!("weathers.{w}.survival"), r))?)
-        } else {
-            None
+    /// The ghost and ring laws at `mor`; at least one is needed, a missing
+    /// one is a warning.
+    fn near_laws(
+        &self,
+        coeffs: &WeatherCoefficients,
+        mor: f64,
+        label: &str,
+        warnings: &mut Vec<String>,
+    ) -> Result<(Option<NearLaw>, Option<NearLaw>), InferError> {
+        let w = self.weather;
+        let law = |l: &Option<NoiseLaw>, name: &str| -> Result<Option<NearLaw>, InferError> {
+            match l {
+                Some(l) => NearLaw::new(l, mor, self.near_range_count_scale)
+                    .map(Some)
+                    .map_err(|r| missing(label, format!("weathers.{w}.{name}"), r)),
+                None => Ok(None),
+            }
         };
-
-        let (ghost, ring) = if self.near_range && !identity {
-            let law = |l: &Option<NoiseLaw>, name: &str| -> Result<Option<NearLaw>, InferError> {
-                match l {
-                    Some(l) => NearLaw::new(l, mor, self.near_range_count_scale)
-                        .map(Some)
-                        .map_err(|r| missing(format!("weathers.{w}.{name}"), r)),
-                    None => Ok(None),
-                }
-            };
-            let ghost = law(&coeffs.ghost, "ghost")?;
-            let ring = law(&coeffs.ring, "ring")?;
-            if ghost.is_none() && ring.is_none() {
-                return Err(missing(
-                    format!("weathers.{w}.ghost, weathers.{w}.ring"),
-                    format!(
-                        "near_range needs at least one of the two laws; both are null (ghost: {}; ring: {})",
-                        coeffs.ghost_reason.as_deref().unwrap_or("no reason given"),
-                        coeffs.ring_reason.as_deref().unwrap_or("no reason given")
-                    ),
+        let ghost = law(&coeffs.ghost, "ghost")?;
+        let ring = law(&coeffs.ring, "ring")?;
+        if ghost.is_none() && ring.is_none() {
+            return Err(missing(
+                label,
+                format!("weathers.{w}.ghost, weathers.{w}.ring"),
+                format!(
+                    "near_range needs at least one of the two laws; both are null (ghost: {}; ring: {})",
+                    coeffs.ghost_reason.as_deref().unwrap_or("no reason given"),
+                    coeffs.ring_reason.as_deref().unwrap_or("no reason given")
+                ),
+            ));
+        }
+        for (l, name, reason) in [
+            (&ghost, "ghost", &coeffs.ghost_reason),
+            (&ring, "ring", &coeffs.ring_reason),
+        ] {
+            if l.is_none() {
+                warnings.push(format!(
+                    "no {name} returns added: the table has no {name} law ({})",
+                    reason.as_deref().unwrap_or("no reason given")
                 ));
             }
-            for (l, name, reason) in [
-                (&ghost, "ghost", &coeffs.ghost_reason),
-                (&ring, "ring", &coeffs.ring_reason),
-            ] {
-                if l.is_none() {
-                    warnings.push(format!(
-                        "no {name} returns added: the table has no {name} law ({})",
-                        reason.as_deref().unwrap_or("no reason given")
-                    ));
-                }
-            }
-            (ghost, ring)
-        } else {
-            (None, None)
-        };
+        }
+        Ok((ghost, ring))
+    }
 
-        // Extension terms (from `murk diagnose`).
+    /// The table's extension terms (from `murk diagnose`), checked; a
+    /// scan-level term without its covariate's value is a warning.
+    fn extension_terms(
+        &self,
+        coeffs: &WeatherCoefficients,
+        identity: bool,
+        label: &str,
+        warnings: &mut Vec<String>,
+    ) -> Result<Vec<murk_types::ModelExtension>, InferError> {
+        let w = self.weather;
         let extensions = if self.extensions && !identity {
             coeffs.extensions.clone()
         } else {
             Vec::new()
         };
         for (i, e) in extensions.iter().enumerate() {
-            e.check()
-                .map_err(|r| missing(format!("weathers.{w}.extensions[{i}]"), r))?;
+            e.check().map_err(|r| {
+                missing(
+                    label,
+                    format!("weathers.{}.extensions[{i}]", self.weather),
+                    r,
+                )
+            })?;
             if e.is_point_level() || e.covariate == "mor" {
                 continue;
             }
@@ -554,89 +577,85 @@ impl ApplyParams {
                 "the table's extension terms were fitted on vanishing_slope; use slope_source = survival or turn extensions off".into(),
             ));
         }
+        Ok(extensions)
+    }
+}
 
-        Ok(Applier {
-            weather: w,
-            mor_m: mor,
-            rain,
-            identity,
-            clear_mor_threshold_m: clear_mor,
-            range_scale,
-            slope_source: self.slope_source,
-            bands,
-            soft,
-            near_range: self.near_range && !identity,
-            ghost,
-            ring,
-            range_noise_m: if identity { 0.0 } else { self.range_noise_m },
-            attenuation_alpha: (self.attenuate_intensity && !identity).then(|| 20f64.ln() / mor),
-            lidar: self.lidar.clone(),
-            azimuth_resolution_deg: az_res,
-            seed: self.seed,
-            warnings,
-            extensions,
-            scan_covariates: self.covariates.clone(),
+/// The checked scalar parameters.
+struct Scalars {
+    range_scale: f64,
+    clear_mor: f64,
+    azimuth_resolution_deg: f64,
+}
+
+/// A parameter outside its range.
+fn invalid(name: &'static str, value: f64, reason: &str) -> InferError {
+    InferError::InvalidParam {
+        name,
+        value: value.to_string(),
+        reason: reason.to_string(),
+    }
+}
+
+/// A table field the parameters need but the table `label` lacks.
+fn missing(label: &str, field: String, reason: String) -> InferError {
+    InferError::MissingCoefficient {
+        table: label.to_string(),
+        field,
+        reason,
+    }
+}
+
+/// The coefficients of weather `w` (clear is refused: it is the identity).
+fn weather_coefficients<'t>(
+    table: &'t CoefficientTable,
+    w: WeatherClass,
+    label: &str,
+) -> Result<&'t WeatherCoefficients, InferError> {
+    if w == WeatherClass::Clear {
+        return Err(InferError::Conflict(
+            "weather clear is the reference: applying it is the identity; choose fog, rain or snow"
+                .into(),
+        ));
+    }
+    table
+        .weathers
+        .get(&w)
+        .ok_or_else(|| InferError::WeatherAbsent {
+            table: label.to_string(),
+            weather: w.to_string(),
+            reason: table
+                .absent
+                .get(&w)
+                .cloned()
+                .unwrap_or_else(|| "not fitted".into()),
+            available: if table.weathers.is_empty() {
+                "none".into()
+            } else {
+                table
+                    .weathers
+                    .keys()
+                    .map(|k| k.name())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            },
         })
-    }
 }
 
-/// Which way [`short_number`] rounds.
-#[derive(Clone, Copy, PartialEq)]
-enum Toward {
-    /// To the nearest.
-    Nearest,
-    /// Up: for a lower bound, so a rate copied from the message is inside.
-    Up,
-    /// Down: for an upper bound.
-    Down,
-}
-
-/// A rate or a MOR for a message: 4 significant digits, without the tail
-/// of a binary fraction (`0.9450000000000001` prints as `0.945`, or `0.9451`
-/// as a lower bound: 0.945 itself is below it).
-fn short_number(v: f64, toward: Toward) -> String {
-    if v == 0.0 || !v.is_finite() {
-        return format!("{v}");
-    }
-    // 4 significant digits through the shortest decimal, so the printed
-    // number has no tail of its own.
-    let four = |x: f64| format!("{x:.3e}").parse::<f64>().unwrap_or(x);
-    // The decimal exponent of `v` itself (`log10` can round 99.999… up to 2).
-    let exp: i32 = format!("{v:e}")
-        .split_once('e')
-        .and_then(|(_, e)| e.parse().ok())
-        .unwrap_or(0);
-    let step = 10f64.powi(exp - 3);
-    let mut r = four(v);
-    if toward == Toward::Up && r < v {
-        r = four(r + step);
-    } else if toward == Toward::Down && r > v {
-        r = four(r - step);
-    }
-    format!("{r}")
-}
-
-#[cfg(test)]
-mod short_number_tests {
-    use super::{Toward, short_number};
-
-    #[test]
-    fn rates_print_with_four_significant_digits_on_the_inside_of_the_range() {
-        assert_eq!(short_number(0.9450000000000001, Toward::Up), "0.9451");
-        assert_eq!(short_number(0.9450000000000001, Toward::Nearest), "0.945");
-        assert_eq!(short_number(0.9450000000000001, Toward::Down), "0.945");
-        assert_eq!(short_number(0.945, Toward::Up), "0.945");
-        assert_eq!(short_number(99.99999999999999, Toward::Down), "99.99");
-        assert_eq!(short_number(100.0, Toward::Down), "100");
-        assert_eq!(short_number(191.57, Toward::Down), "191.5");
-        assert_eq!(short_number(191.57, Toward::Up), "191.6");
-        assert_eq!(short_number(0.0, Toward::Up), "0");
-    }
-}
-
-/// The table's clear-weather MOR threshold, when it records one.
-fn table_clear_threshold(_table: &CoefficientTable) -> Option<f64> {
-    None
+/// The soft survival edge from the table's survival fit.
+fn soft_edge(
+    coeffs: &WeatherCoefficients,
+    w: WeatherClass,
+    label: &str,
+) -> Result<SoftEdge, InferError> {
+    let s = coeffs.survival.as_ref().ok_or_else(|| {
+        missing(
+            label,
+            format!("weathers.{w}.survival"),
+            "soft_edge needs the survival fit, which this table lacks".into(),
+        )
+    })?;
+    SoftEdge::new(s).map_err(|r| missing(label, format!("weathers.{w}.survival"), r))
 }
 
 /// Converts a rain rate with the table's conversion, checking its validity.
@@ -759,4 +778,58 @@ fn rain_to_mor(
             warning,
         },
     ))
+}
+
+/// Which way [`short_number`] rounds.
+#[derive(Clone, Copy, PartialEq)]
+enum Toward {
+    /// To the nearest.
+    Nearest,
+    /// Up: for a lower bound, so a rate copied from the message is inside.
+    Up,
+    /// Down: for an upper bound.
+    Down,
+}
+
+/// A rate or a MOR for a message: 4 significant digits, without the tail
+/// of a binary fraction (`0.9450000000000001` prints as `0.945`, or `0.9451`
+/// as a lower bound: 0.945 itself is below it).
+fn short_number(v: f64, toward: Toward) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return format!("{v}");
+    }
+    // 4 significant digits through the shortest decimal, so the printed
+    // number has no tail of its own.
+    let four = |x: f64| format!("{x:.3e}").parse::<f64>().unwrap_or(x);
+    // The decimal exponent of `v` itself (`log10` can round 99.999… up to 2).
+    let exp: i32 = format!("{v:e}")
+        .split_once('e')
+        .and_then(|(_, e)| e.parse().ok())
+        .unwrap_or(0);
+    let step = 10f64.powi(exp - 3);
+    let mut r = four(v);
+    if toward == Toward::Up && r < v {
+        r = four(r + step);
+    } else if toward == Toward::Down && r > v {
+        r = four(r - step);
+    }
+    format!("{r}")
+}
+
+#[cfg(test)]
+mod short_number_tests {
+    use super::{Toward, short_number};
+
+    #[test]
+    fn rates_print_with_four_significant_digits_on_the_inside_of_the_range() {
+        assert_eq!(short_number(0.9450000000000001, Toward::Up), "0.9451");
+        assert_eq!(short_number(0.9450000000000001, Toward::Nearest), "0.945");
+        assert_eq!(short_number(0.9450000000000001, Toward::Down), "0.945");
+        assert_eq!(short_number(0.945, Toward::Up), "0.945");
+        assert_eq!(short_number(99.99999999999999, Toward::Down), "99.99");
+        assert_eq!(short_number(100.0, Toward::Down), "100");
+        assert_eq!(short_number(191.57, Toward::Down), "191.5");
+        assert_eq!(short_number(191.57, Toward::Up), "191.6");
+        assert_eq!(short_number(0.0, Toward::Up), "0");
+    }
 }

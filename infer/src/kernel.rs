@@ -22,8 +22,8 @@ use murk_types::{IntensityScale, PointCloud};
 use rand::RngExt;
 use rayon::prelude::*;
 
-use crate::applier::{BandRule, EdgeLaw, SoftEdge};
-use crate::sampling::{CHUNK, Purpose, ScanSeed, norm_cdf};
+use crate::model::{BandRule, SoftEdge};
+use crate::sampling::{CHUNK, Purpose, ScanSeed};
 
 /// Most reflectivity bands a table may have.
 pub(crate) const MAX_BANDS: usize = 16;
@@ -68,16 +68,13 @@ impl Counts {
         self
     }
 
-    /// Points per band (points below the lowest band count in it, points
-    /// above the highest in it), and kept points per band.
+    /// Points per band (points below the lowest band are not in it: see
+    /// [`Counts::below`]; points above the highest are in it), and kept
+    /// points per band.
     pub(crate) fn per_band(&self, bands: usize) -> Vec<(u64, u64)> {
         (0..bands)
             .map(|k| {
-                let (lo, lo_kept) = if k == 0 {
-                    (self.n, self.kept)
-                } else {
-                    (self.ge[k], self.ge_kept[k])
-                };
+                let (lo, lo_kept) = (self.ge[k], self.ge_kept[k]);
                 let (hi, hi_kept) = if k + 1 < bands {
                     (self.ge[k + 1], self.ge_kept[k + 1])
                 } else {
@@ -91,6 +88,11 @@ impl Counts {
     /// Points below the lowest band's lower edge.
     pub(crate) fn below(&self) -> u64 {
         self.n - self.ge[0]
+    }
+
+    /// Of the points below the lowest band, those that vanished.
+    pub(crate) fn below_vanished(&self) -> u64 {
+        self.below() - (self.kept - self.ge_kept[0])
     }
 }
 
@@ -280,11 +282,7 @@ pub(crate) fn soft_mask(
                     .hypot(cloud.y[i] as f64)
                     .hypot(cloud.z[i] as f64);
                 let zc = (r - centre[b]) / width[b];
-                let f = match soft.edge {
-                    EdgeLaw::Probit => norm_cdf(zc),
-                    EdgeLaw::Logistic => 1.0 / (1.0 + (-zc).exp()),
-                };
-                let p = soft.keep_probability(f);
+                let p = soft.keep_probability_given_clear(zc);
                 let u: f64 = rng.random();
                 let keep = u < p;
                 *slot = keep as u8;

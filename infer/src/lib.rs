@@ -80,16 +80,16 @@ mod error;
 mod extension;
 mod hyperparams;
 mod kernel;
+mod model;
 mod near;
 mod sampling;
 mod summary;
 
-pub use applier::{Applier, BandRule, BandSummaryRule, ModelSummary};
+pub use applier::Applier;
 pub use batch::{BatchOptions, BatchReport, FileReport, Job, Plan, Skipped};
 pub use error::InferError;
-pub use hyperparams::{
-    ApplyParams, DEFAULT_AZIMUTH_RESOLUTION_DEG, DEFAULT_CLEAR_MOR_M, Severity, SlopeSource,
-};
+pub use hyperparams::{ApplyParams, DEFAULT_AZIMUTH_RESOLUTION_DEG, DEFAULT_CLEAR_MOR_M, Severity};
+pub use model::{BandRule, BandSummaryRule, ModelSummary, SlopeSource};
 pub use near::NearRangeCounts;
 pub use summary::{ApplySummary, BandSummary, SUMMARY_FORMAT};
 

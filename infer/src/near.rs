@@ -32,8 +32,8 @@ use rand_distr::{Distribution, Poisson};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::applier::NearLaw;
 use crate::error::InferError;
+use crate::model::NearLaw;
 use crate::sampling::{CHUNK, Purpose, ScanSeed};
 
 /// What became of the near-range returns of one kind in one scan.
@@ -144,7 +144,10 @@ fn poisson(rng: &mut ChaCha8Rng, lambda: f64) -> u64 {
 }
 
 /// Adds the near-range returns of one scan to `out` (the scan after
-/// vanishing and perturbation); `input` is the scan as read.
+/// vanishing and perturbation); `input` is the scan as read. The indices
+/// of `out` whose point a soft target replaced go to `replaced`, ascending
+/// (a writer that copies the other cells of a row must not give them to
+/// a fog echo).
 pub(crate) fn add_near_range(
     input: &PointCloud,
     out: &mut PointCloud,
@@ -152,6 +155,7 @@ pub(crate) fn add_near_range(
     seed: ScanSeed,
     key: &str,
     warnings: &mut Vec<String>,
+    replaced: &mut Vec<usize>,
 ) -> Result<(Option<NearRangeCounts>, Option<NearRangeCounts>), InferError> {
     let mut rng = seed.rng(Purpose::NearRange, 0);
     let n_ghost = s.ghost.map_or(0, |l| poisson(&mut rng, l.expected));
@@ -227,7 +231,7 @@ pub(crate) fn add_near_range(
             events.len()
         ));
     } else if !events.is_empty() {
-        place(input, out, s, &events, &mut outcome, bins, res);
+        place(input, out, s, &events, &mut outcome, res, replaced);
     }
 
     let tally = |law: Option<&NearLaw>, ghost: bool| {
@@ -262,8 +266,8 @@ fn place(
     s: &NearSettings<'_>,
     events: &[Event],
     outcome: &mut [Outcome],
-    _bins: u64,
     res: f64,
+    replaced: &mut Vec<usize>,
 ) {
     // Events by ring.
     let max_ring = events.iter().map(|e| e.ring).max().unwrap_or(0) as usize;
@@ -357,6 +361,9 @@ fn place(
             outcome[e] = Outcome::Occluded;
         }
     }
+    let first = replaced.len();
+    replaced.extend(owner.keys().copied());
+    replaced[first..].sort_unstable();
     for e in added {
         let ev = &events[e];
         let el = elevation[ev.ring as usize];

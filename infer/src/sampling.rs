@@ -1,7 +1,8 @@
 //! Seeds and the few random laws the applier draws from.
 //!
 //! **Reproducibility.** Every random draw of a scan comes from a ChaCha8
-//! generator whose 256-bit seed is `SHA-256("murk-infer/1" ‖ seed ‖ key)`,
+//! generator keyed by [`murk_types::seed::derive`]`(seed, key,
+//! Purpose::ApplyScan)` (SHA-256 of `"murk-infer/1" ‖ seed ‖ len(key) ‖ key`),
 //! where `key` is the scan's name (its path relative to the batch input). A
 //! scan is processed in fixed chunks of [`CHUNK`] points, and each chunk of
 //! each randomised step reads its own ChaCha stream
@@ -11,7 +12,6 @@
 
 use rand::rngs::ChaCha8Rng;
 use rand::{RngExt, SeedableRng};
-use sha2::{Digest, Sha256};
 
 /// Points per chunk of the parallel passes. Part of the determinism
 /// contract: randomised steps draw one stream per chunk, so changing it
@@ -37,14 +37,11 @@ pub(crate) enum Purpose {
 pub(crate) struct ScanSeed([u8; 32]);
 
 impl ScanSeed {
-    /// Derives the seed of scan `key` under master `seed`.
+    /// Derives the seed of scan `key` under master `seed` (murk's one
+    /// derivation, [`murk_types::seed::derive`]).
     pub(crate) fn new(seed: u64, key: &str) -> Self {
-        let mut h = Sha256::new();
-        h.update(b"murk-infer/1");
-        h.update(seed.to_le_bytes());
-        h.update((key.len() as u64).to_le_bytes());
-        h.update(key.as_bytes());
-        ScanSeed(h.finalize().into())
+        use murk_types::seed::{Purpose, derive};
+        ScanSeed(derive(seed, key, Purpose::ApplyScan).bytes())
     }
 
     /// The generator of `purpose` for chunk `chunk`.

@@ -16,9 +16,9 @@ pub struct BandSummary {
     pub reflectivity_min: f64,
     /// Upper edge (exclusive); null when unbounded.
     pub reflectivity_max: Option<f64>,
-    /// Input points in the band (points below the lowest band are counted
-    /// in it, points above the highest in it; see `below_bands` /
-    /// `above_bands`).
+    /// Input points in the band (points above the highest band are counted
+    /// in it, see `above_bands`; points below the lowest are not, see
+    /// `below_bands`).
     pub points_in: u64,
     /// Of those, points that vanished.
     pub vanished: u64,
@@ -42,8 +42,11 @@ pub struct ApplySummary {
     /// Per reflectivity band of the model.
     pub bands: Vec<BandSummary>,
     /// Input points whose reflectivity lies below the lowest band (they
-    /// follow the lowest band's slope).
+    /// follow the lowest band's slope but are not counted in its
+    /// `points_in`).
     pub below_bands: u64,
+    /// Of those, points that vanished.
+    pub below_bands_vanished: u64,
     /// Input points at or above the highest band's upper edge (they follow
     /// the highest band's slope).
     pub above_bands: u64,
@@ -79,6 +82,7 @@ impl ApplySummary {
                 })
                 .collect(),
             below_bands: 0,
+            below_bands_vanished: 0,
             above_bands: 0,
             ghost: None,
             ring: None,
@@ -100,6 +104,7 @@ impl ApplySummary {
             a.vanished += b.vanished;
         }
         self.below_bands += o.below_bands;
+        self.below_bands_vanished += o.below_bands_vanished;
         self.above_bands += o.above_bands;
         for (mine, theirs) in [(&mut self.ghost, &o.ghost), (&mut self.ring, &o.ring)] {
             if let Some(t) = theirs {

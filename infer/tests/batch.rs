@@ -129,6 +129,40 @@ fn output_bytes_do_not_depend_on_thread_count() {
     assert_eq!(outputs[0], outputs[1]);
 }
 
+/// A warning of the model (here: a MOR below the fitted range) is written
+/// once, in `model.warnings`; the totals carry only what the scans raised
+/// (they used to repeat the model's warnings in front of the scans').
+#[test]
+fn model_warnings_are_reported_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("in");
+    tree(&input);
+    let a = fog(30.0);
+    assert!(
+        a.warnings()
+            .iter()
+            .any(|w| w.contains("outside the 50–200 m")),
+        "{:?}",
+        a.warnings()
+    );
+    let p = plan(
+        std::slice::from_ref(&input),
+        &dir.path().join("out"),
+        &BatchOptions::default(),
+    )
+    .unwrap();
+    let report = run(&a, &p, &BatchOptions::default(), &|_| {}).unwrap();
+    assert_eq!(report.model.warnings, a.warnings());
+    let scans: Vec<&String> = report
+        .files
+        .iter()
+        .flat_map(|f| &f.summary.warnings)
+        .collect();
+    assert_eq!(report.totals.warnings.iter().collect::<Vec<_>>(), scans);
+    let json = report.to_json();
+    assert_eq!(json.matches("outside the 50–200 m").count(), 1, "{json}");
+}
+
 #[test]
 fn format_change_renames_and_converts_intensity_scale() {
     let dir = tempfile::tempdir().unwrap();
@@ -143,8 +177,11 @@ fn format_change_renames_and_converts_intensity_scale() {
     assert_eq!(p.jobs[0].key, "b.pcd");
     let a = fog(5000.0);
     run(&a, &p, &opts, &|_| {}).unwrap();
-    let back = read_cloud(&out.join("b.pcd"), &ReadOptions::default()).unwrap();
-    // PCD is read as calibrated: the KITTI 0–1 values were converted.
+    let mut back = read_cloud(&out.join("b.pcd"), &ReadOptions::default()).unwrap();
+    // The PCD records the KITTI scale it was written in: read back, the
+    // reflectivities are the input's.
+    assert_eq!(back.intensity_scale, murk_types::IntensityScale::KITTI);
+    back.to_calibrated();
     let mut cal = b.clone();
     cal.to_calibrated();
     for (x, y) in back.intensity.iter().zip(&cal.intensity) {

@@ -7,7 +7,7 @@
 mod common;
 
 use common::*;
-use murk_infer::{ApplyParams, InferError, Severity, SlopeSource};
+use murk_infer::{ApplyParams, DEFAULT_CLEAR_MOR_M, InferError, Severity, SlopeSource};
 use murk_types::{IntensityScale, PointCloud, WeatherClass};
 
 fn fog(mor: f64) -> murk_infer::Applier {
@@ -209,6 +209,28 @@ fn clear_mor_is_the_identity_even_with_every_option_on() {
         .build(&seed_table())
         .unwrap();
     assert!(a.is_identity());
+    assert_eq!(a.describe().clear_mor_threshold_m, 400.0);
+}
+
+/// The table records no clear threshold, so without the parameter it is
+/// [`DEFAULT_CLEAR_MOR_M`] whatever the table holds: even a table fitted on
+/// fog recordings up to 3000 m applies its slopes at 2500 m only when told.
+#[test]
+fn clear_threshold_is_the_default_unless_given() {
+    let mut t = seed_table();
+    let fog = t.weathers.get_mut(&WeatherClass::Fog).unwrap();
+    fog.mor_max_m = Some(3000.0);
+    let a = ApplyParams::new(WeatherClass::Fog, Severity::Mor(2500.0))
+        .build(&t)
+        .unwrap();
+    assert_eq!(a.describe().clear_mor_threshold_m, DEFAULT_CLEAR_MOR_M);
+    assert!(a.is_identity(), "2500 m ≥ the 2000 m default");
+    let a = ApplyParams::new(WeatherClass::Fog, Severity::Mor(2500.0))
+        .clear_mor_threshold_m(4000.0)
+        .build(&t)
+        .unwrap();
+    assert!(!a.is_identity());
+    assert!((a.vanishing_distance_m(50.0) - FOG_HIGH * 2500.0).abs() < 1e-9);
 }
 
 #[test]

@@ -268,7 +268,12 @@ impl Campaign {
 
     /// Applies the rules and the review to every recording.
     pub fn select(&self) -> Selection {
-        select::select(self)
+        select::select(
+            self.name(),
+            self.rules(),
+            self.recordings(),
+            self.review_file().is_some(),
+        )
     }
 }
 

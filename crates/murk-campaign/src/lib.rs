@@ -19,6 +19,16 @@
 //!   class before and after review, outages, ambiguity, MOR distribution),
 //!   which prints as a table and serializes to JSON.
 //!
+//! **How the recordings are read.** Besides the sensor geometry, `[lidar]`
+//! says how murk-io reads the campaign's files (`fit` and `diagnose` pass
+//! it on; see `murk_types::LidarSpec`):
+//!
+//! | key | values | default |
+//! |---|---|---|
+//! | `intensity_scale` | `calibrated`, `kitti`, `six-bit`, `{ gain = G, offset = O }` | the format's (KITTI `.bin`: `kitti`; others `calibrated`) |
+//! | `bin_layout` | `xyzi` (KITTI), `xyzir` (Seeing Through Fog, nuScenes), `xyzit` | `.bin`: `xyzi` when the file size fits only it; a size that fits several layouts is refused |
+//! | `csv_columns` | e.g. `["x", "y", "z", "intensity", "ring"]` | none: CSV files start with a header line |
+//!
 //! ```
 //! use murk_campaign::Campaign;
 //! use murk_types::WeatherClass;
@@ -64,6 +74,7 @@ mod error;
 pub mod rules;
 mod select;
 mod suggest;
+mod vocabulary;
 mod weather;
 
 pub use campaign::{Campaign, RadarSpec, layout};
@@ -75,7 +86,5 @@ pub use rules::{
 pub use select::{
     ClassSummary, HistogramBin, MorStats, NOT_REVIEWED, SelectedRecording, Selection, Summary,
 };
-pub use weather::{
-    Cell, Column, ColumnRole, Covariate, KNOWN_SENSOR_COLUMNS, LidarFile, Recording, Review,
-    SensorKind, columns,
-};
+pub use vocabulary::{Cell, Covariate, KNOWN_SENSOR_COLUMNS, SensorKind, columns};
+pub use weather::{Column, ColumnRole, LidarFile, Recording, Review};

@@ -51,7 +51,7 @@ use serde::{Deserialize, Serialize};
 use toml::Spanned;
 
 use crate::error::CampaignError;
-use crate::weather::{Cell, KNOWN_SENSOR_COLUMNS, SensorKind, columns};
+use crate::vocabulary::{Cell, KNOWN_SENSOR_COLUMNS, SensorKind, columns};
 
 /// A comparison operator.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]

@@ -7,9 +7,9 @@ use std::path::Path;
 use murk_types::WeatherClass;
 use serde::{Deserialize, Serialize};
 
-use crate::campaign::Campaign;
-use crate::rules::Classification;
-use crate::weather::{Cell, Covariate, LidarFile, Recording};
+use crate::rules::{Classification, RuleSet};
+use crate::vocabulary::{Cell, Covariate};
+use crate::weather::{LidarFile, Recording};
 
 /// Reason recorded for a recording that `review.csv` does not list.
 pub const NOT_REVIEWED: &str = "not listed in review.csv";
@@ -278,11 +278,16 @@ impl Summary {
     }
 }
 
-pub(crate) fn select(campaign: &Campaign) -> Selection {
-    let rules = campaign.rules();
-    let reviewed = campaign.review_file().is_some();
-    let recordings: Vec<SelectedRecording> = campaign
-        .recordings()
+/// Classifies `recordings` of campaign `name` with `rules` and applies the
+/// review (an allowlist when `reviewed`, i.e. the campaign has a
+/// `review.csv`).
+pub(crate) fn select(
+    name: &str,
+    rules: &RuleSet,
+    recordings: &[Recording],
+    reviewed: bool,
+) -> Selection {
+    let recordings: Vec<SelectedRecording> = recordings
         .iter()
         .map(|r| {
             let get = |c: &str| r.value(c);
@@ -335,7 +340,7 @@ pub(crate) fn select(campaign: &Campaign) -> Selection {
         .collect();
 
     let summary = Summary {
-        campaign: campaign.name().to_string(),
+        campaign: name.to_string(),
         rules: rules.name().to_string(),
         rule_params: rules.params().clone(),
         recordings: recordings.len(),

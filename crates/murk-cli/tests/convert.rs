@@ -88,7 +88,17 @@ fn a_scan_survives_every_writable_format_and_back() {
         let stdout = ok(&args);
         assert!(stdout.contains("3000 points"), "{stdout}");
         let path = out.join(format!("scan.{ext}"));
-        let back = read_cloud(&path, &ReadOptions::default()).unwrap();
+        let mut back = read_cloud(&path, &ReadOptions::default()).unwrap();
+        if *format == "bin" {
+            // A KITTI `.bin` holds 0–1 intensity: read back, the
+            // reflectivities are the input's (to rounding), not the bits.
+            assert_eq!(back.intensity_scale, IntensityScale::KITTI);
+            back.to_calibrated();
+            for (a, b) in back.intensity.iter().zip(&cloud.intensity) {
+                assert!((a - b).abs() < 1e-3, "bin: intensity {a} vs {b}");
+            }
+            back.intensity.clone_from(&cloud.intensity);
+        }
         same_points(&back, &cloud, &format!("{format} {extra:?}"));
         let keeps_time = !matches!(*format, "bin" | "nuscenes");
         assert_eq!(back.time.is_some(), keeps_time, "{format}: time");
@@ -115,7 +125,7 @@ fn folders_are_walked_recursively_and_keep_their_layout() {
     let out = dir.path().join("out");
     let stdout = ok(&["convert", s(&inp), "--out", s(&out), "--format", "pcd"]);
     assert!(
-        stdout.contains("converted 3 inputs into 3 pcd files (21 points)"),
+        stdout.contains("converted 3 inputs into 3 pcd files (21 points; intensity calibrated)"),
         "{stdout}"
     );
     let n = |p: &str| {
@@ -217,21 +227,44 @@ fn a_pcap_becomes_one_file_per_frame() {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
+    let names_in = |d: &Path| {
+        let mut names: Vec<String> = std::fs::read_dir(d)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().into_string().unwrap())
+            .collect();
+        names.sort();
+        names
+    };
+    // By default the partial first and last revolutions are left out,
+    // named, and the frames keep their capture numbers.
     let out = dir.path().join("frames");
     let stdout = ok(&["convert", s(&pcap), "--out", s(&out), "--format", "pcd"]);
     let frames_dir = out.join("vlp16-test-90deg-1-50-frames");
-    let mut names: Vec<String> = std::fs::read_dir(&frames_dir)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().into_string().unwrap())
-        .collect();
-    names.sort();
-    assert!(names.len() > 1, "{names:?}");
-    assert_eq!(names[0], "frame-000001.pcd");
-    let want: Vec<String> = (1..=names.len())
-        .map(|k| format!("frame-{k:06}.pcd"))
-        .collect();
+    let names = names_in(&frames_dir);
+    let want: Vec<String> = (2..=51).map(|k| format!("frame-{k:06}.pcd")).collect();
     assert_eq!(names, want);
-    // The frames hold every point of the capture.
+    assert!(stdout.contains("(50 frames)"), "{stdout}");
+    assert!(
+        stdout.contains("left out 2 partial revolutions: frame-000001.pcd")
+            && stdout.contains("frame-000052.pcd"),
+        "{stdout}"
+    );
+
+    // --keep-partial: every revolution, holding every point of the capture.
+    let out = dir.path().join("all");
+    let stdout = ok(&[
+        "convert",
+        s(&pcap),
+        "--out",
+        s(&out),
+        "--format",
+        "pcd",
+        "--keep-partial",
+    ]);
+    let frames_dir = out.join("vlp16-test-90deg-1-50-frames");
+    let names = names_in(&frames_dir);
+    let want: Vec<String> = (1..=52).map(|k| format!("frame-{k:06}.pcd")).collect();
+    assert_eq!(names, want);
     let all = read_cloud(&pcap, &ReadOptions::default()).unwrap();
     let total: usize = names
         .iter()
@@ -246,7 +279,8 @@ fn a_pcap_becomes_one_file_per_frame() {
         stdout.contains(&format!(
             "split into one file per frame) into {} pcd files",
             names.len()
-        )),
+        )) && stdout.contains("(52 frames)")
+            && stdout.contains("2 of the 52 frames written are partial"),
         "{stdout}"
     );
 }

@@ -225,14 +225,14 @@ fn convert_prints_one_line_for_the_whole_batch() {
     assert_eq!(
         text.lines().collect::<Vec<_>>(),
         vec![format!(
-            "converted 12 inputs into 12 bin files (240 points) in {}",
+            "converted 12 inputs into 12 bin files (240 points; intensity calibrated → kitti) in {}",
             out.display()
         )]
     );
     let o = murk(&["convert", s(&scan), "--out", s(&out), "--format", "csv"]);
     let text = String::from_utf8_lossy(&o.stdout);
     assert!(
-        text.starts_with("converted 1 input into 1 csv file (20 points)"),
+        text.starts_with("converted 1 input into 1 csv file (20 points; intensity calibrated)"),
         "{text}"
     );
 }

@@ -110,3 +110,67 @@ fn missing_or_mismatched_depth_is_refused() {
     ]);
     assert!(!o.status.success(), "a negative rate is refused");
 }
+
+/// An image's drops come from `--seed` and its file name, not from where it
+/// stands in the list: the same image gets the same pixels first or second
+/// in a batch (it used to be seeded by its position).
+#[test]
+fn an_image_gets_the_same_drops_wherever_it_stands_in_the_batch() {
+    let dir = tempfile::tempdir().unwrap();
+    let (image, depth) = setup(dir.path());
+    let other = dir.path().join("in").join("other.png");
+    std::fs::copy(&image, &other).unwrap();
+    let run = |images: [&Path; 2], out: &str| {
+        let out = dir.path().join(out);
+        let o = murk(&[
+            "rain",
+            "--rate",
+            "80",
+            s(images[0]),
+            s(images[1]),
+            "--depth",
+            s(&depth),
+            s(&depth),
+            "--out",
+            s(&out),
+            "--seed",
+            "3",
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        (
+            pixels(&out.join("street.png")),
+            pixels(&out.join("other.png")),
+        )
+    };
+    let (street_first, other_second) = run([&image, &other], "a");
+    let (street_second, other_first) = run([&other, &image], "b");
+    assert_eq!(street_first, street_second, "street.png keeps its drops");
+    assert_eq!(other_first, other_second, "other.png keeps its drops");
+    assert_ne!(street_first, other_first, "two names, two drop fields");
+}
+
+#[test]
+fn two_images_with_the_same_file_name_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let (image, depth) = setup(dir.path());
+    let twin_dir = dir.path().join("twin");
+    std::fs::create_dir_all(&twin_dir).unwrap();
+    let twin = twin_dir.join("street.png");
+    std::fs::copy(&image, &twin).unwrap();
+    let out = dir.path().join("out");
+    let o = murk(&[
+        "rain",
+        "--rate",
+        "10",
+        s(&image),
+        s(&twin),
+        "--depth",
+        s(&depth),
+        s(&depth),
+        "--out",
+        s(&out),
+    ]);
+    assert!(!o.status.success());
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(e.contains("same file name"), "{e}");
+}

@@ -12,7 +12,7 @@ use murk_fixtures::{
     EffectFunction, EffectSpec, Generator, GeneratorConfig, Observable, OutputOptions, PerClass,
     Preset,
 };
-use murk_types::WeatherClass;
+use murk_types::{ExtensionObservable, WeatherClass};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let reps: u64 = std::env::args().nth(1).map_or(Ok(3), |s| s.parse())?;
@@ -58,7 +58,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     .check()?
                     .run(&Campaign::open(&out)?)?;
                 if let Some(t) = d.report.top() {
-                    if t.observable == "survival" && t.covariate == "elevation" {
+                    if t.observable == ExtensionObservable::Survival && t.covariate == "elevation" {
                         found += 1;
                         gain += d.report.gain.as_ref().map_or(0.0, |g| g.relative);
                     } else {

@@ -45,7 +45,7 @@ use murk_types::CovariateValue;
 use rand::rngs::ChaCha8Rng;
 use rand::seq::SliceRandom;
 use rand::{RngExt, SeedableRng};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
 /// Distinct values up to which a numeric covariate is binned by value.
@@ -186,12 +186,12 @@ fn fmt(x: f64) -> String {
 }
 
 /// One bin of a profile.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ProfileBin {
     /// The bin (range or category).
     pub label: String,
     /// Mean of the covariate in the bin (numeric covariates).
-    #[serde(skip_serializing_if = "Option::is_none")]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub center: Option<f64>,
     /// Mean residual in the bin (centred per recording for point-level
     /// covariates, relative to the overall mean for scan-level ones).

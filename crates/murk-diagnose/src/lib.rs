@@ -80,6 +80,7 @@ use std::collections::BTreeMap;
 
 use murk_campaign::Campaign;
 use murk_fit::{FitParams, FitValidParams};
+use murk_types::seed::Purpose;
 use murk_types::{
     CoefficientTable, CovariateValue, ExtensionObservable, POINT_COVARIATES, WeatherClass,
 };
@@ -89,7 +90,9 @@ use rand::seq::SliceRandom;
 use rayon::prelude::*;
 
 pub use error::DiagnoseError;
-pub use report::{DIAGNOSIS_FORMAT, Diagnosis, Extended, Finding, Gain, ModelMetrics, Report};
+pub use report::{
+    DIAGNOSIS_FORMAT, Diagnosis, Extended, Finding, Gain, Level, ModelMetrics, Report,
+};
 
 use attribution::{Binning, TestOutcome, holm, point_test, scan_test};
 use data::Loaded;
@@ -374,16 +377,100 @@ fn residuals(loaded: &Loaded, evals: &[RecEval]) -> Residuals {
     Residuals { points, scans }
 }
 
-fn seed_of(seed: u64, parts: &[&str]) -> u64 {
-    use sha2::{Digest, Sha256};
-    let mut h = Sha256::new();
-    h.update(seed.to_le_bytes());
-    for p in parts {
-        h.update(p.as_bytes());
-        h.update([0]);
+/// The seed of one randomised step: murk's one derivation
+/// ([`murk_types::seed::derive`]) of the master seed, the step's key and
+/// its purpose.
+fn seed_of(seed: u64, purpose: Purpose, parts: &[&str]) -> u64 {
+    murk_types::seed::derive(seed, &murk_types::seed::key(parts), purpose).to_u64()
+}
+
+/// The split of the recordings into folds.
+struct Folds {
+    /// Number of folds.
+    k: usize,
+    /// Fold of each recording (pooled order).
+    fold_of: Vec<usize>,
+}
+
+impl Folds {
+    /// The recordings of fold `f`.
+    fn held_out(&self, f: usize) -> Vec<usize> {
+        (0..self.fold_of.len())
+            .filter(|&j| self.fold_of[j] == f)
+            .collect()
     }
-    let d = h.finalize();
-    u64::from_le_bytes(d[..8].try_into().expect("8 bytes"))
+
+    /// The recordings of every other fold.
+    fn fit_set(&self, f: usize) -> Vec<usize> {
+        (0..self.fold_of.len())
+            .filter(|&j| self.fold_of[j] != f)
+            .collect()
+    }
+}
+
+/// The baseline model per fold and its held-out evaluation.
+struct Baseline {
+    /// Table of each fold.
+    tables: Vec<CoefficientTable>,
+    /// Held-out recordings of each fold.
+    held: Vec<Vec<usize>>,
+    /// Evaluation of every recording by its fold's table, in pooled order.
+    evals: Vec<RecEval>,
+}
+
+/// The extended model of the top finding.
+struct Extension {
+    extended: Extended,
+    gain: Option<Gain>,
+    table: CoefficientTable,
+}
+
+/// `(before − after) / before` as a [`Gain`], when both are known and
+/// `before` is positive.
+fn relative_gain(metric: &str, before: Option<f64>, after: Option<f64>) -> Option<Gain> {
+    match (before, after) {
+        (Some(b), Some(a)) if b > 0.0 => Some(Gain {
+            metric: metric.to_string(),
+            before: b,
+            after: a,
+            relative: (b - a) / b,
+        }),
+        _ => None,
+    }
+}
+
+/// The report order of `findings` (indices): significant first; observables
+/// by their strongest significant finding; within one observable by
+/// strength, a dependence seen inside recordings (point level) weighted by
+/// [`POINT_LEVEL_PREFERENCE`] over one across recordings: recording means
+/// mix returns whose composition changes with the scan (at low MOR only
+/// near returns survive), so an effect along range also shows along MOR, a
+/// little weaker or stronger.
+fn rank(findings: &[Finding]) -> Vec<usize> {
+    let mut group: BTreeMap<ExtensionObservable, f64> = BTreeMap::new();
+    for f in findings.iter().filter(|f| f.significant) {
+        let g = group.entry(f.observable).or_insert(0.0);
+        *g = g.max(f.strength);
+    }
+    let gs = |i: usize| group.get(&findings[i].observable).copied().unwrap_or(0.0);
+    let score = |i: usize| {
+        let f = &findings[i];
+        if f.significant && f.level == Level::Point {
+            f.strength * POINT_LEVEL_PREFERENCE
+        } else {
+            f.strength
+        }
+    };
+    let mut idx: Vec<usize> = (0..findings.len()).collect();
+    idx.sort_by(|&a, &b| {
+        findings[b]
+            .significant
+            .cmp(&findings[a].significant)
+            .then(gs(b).total_cmp(&gs(a)))
+            .then(score(b).total_cmp(&score(a)))
+            .then(a.cmp(&b))
+    });
+    idx
 }
 
 impl DiagnoseValidParams {
@@ -398,7 +485,9 @@ impl DiagnoseValidParams {
             })
     }
 
-    /// Runs the diagnosis on `campaign`.
+    /// Runs the diagnosis on `campaign`: folds, the baseline per fold on
+    /// held-out recordings, attribution of its residuals, and the extension
+    /// of the top finding with its held-out gain.
     pub fn run(&self, campaign: &Campaign) -> Result<Diagnosis, DiagnoseError> {
         let p = &self.0;
         let fit_params = self.fit_params()?;
@@ -412,117 +501,18 @@ impl DiagnoseValidParams {
                 ),
             });
         }
-        // Folds.
-        let k = p.folds.min(n);
-        let mut order: Vec<usize> = (0..n).collect();
-        order.shuffle(&mut ChaCha8Rng::seed_from_u64(seed_of(p.seed, &["folds"])));
-        let mut fold_of = vec![0; n];
-        for (pos, &j) in order.iter().enumerate() {
-            fold_of[j] = pos % k;
-        }
+        let folds = self.folds(n);
         let sim = SimOptions {
             sims: p.sims,
             voxel_m: p.voxel_m,
             local_box: p.local_box,
-            seed: seed_of(p.seed, &["simulate"]),
+            seed: seed_of(p.seed, Purpose::DiagnoseSimulate, &["simulate"]),
         };
-        // Baseline per fold, held-out evaluation.
-        let mut tables = Vec::with_capacity(k);
-        let mut held: Vec<Vec<usize>> = Vec::with_capacity(k);
-        let mut baseline_evals: Vec<RecEval> = Vec::with_capacity(n);
-        for f in 0..k {
-            let out: Vec<usize> = (0..n).filter(|&j| fold_of[j] == f).collect();
-            let table = match &p.coefficients {
-                Some(t) => t.clone(),
-                None => self.fit_on(
-                    &loaded,
-                    &(0..n).filter(|&j| fold_of[j] != f).collect::<Vec<_>>(),
-                    &fit_params,
-                    &format!("fold {}", f + 1),
-                )?,
-            };
-            baseline_evals.extend(evaluate(&loaded, &table, &out, Some(&sim), &fit_params)?);
-            tables.push(table);
-            held.push(out);
-        }
-        baseline_evals.sort_by_key(|e| e.rec);
-        let baseline_metrics = Metrics::of(&loaded, &baseline_evals);
-
-        // Attribution.
-        let res = residuals(&loaded, &baseline_evals);
-        let mut tests = self.tests(&loaded, &baseline_evals, &res);
-        let pvals: Vec<f64> = tests.iter().map(|t| t.outcome.p_value).collect();
-        let adjusted = holm(&pvals);
-        let mut findings: Vec<Finding> = tests
-            .iter()
-            .zip(&adjusted)
-            .map(|(t, &padj)| {
-                let threshold = p.relevance.of(t.observable);
-                let strength = if threshold > 0.0 {
-                    t.outcome.strength / threshold
-                } else {
-                    t.outcome.strength
-                };
-                Finding {
-                    observable: t.observable.name().to_string(),
-                    covariate: t.covariate.clone(),
-                    strength,
-                    significant: padj < p.alpha && t.outcome.strength >= threshold,
-                    cause: String::new(),
-                    level: if t.point_level { "point" } else { "scan" }.to_string(),
-                    effect: t.outcome.strength,
-                    relevance_threshold: threshold,
-                    p_value: t.outcome.p_value,
-                    p_adjusted: padj,
-                    recordings: t.outcome.recordings,
-                    explained_by: None,
-                    profile: t.outcome.profile.clone(),
-                }
-            })
-            .collect();
-        // Covariates echoing the top finding of their observable.
-        self.explain_away(&loaded, &baseline_evals, &res, &mut tests, &mut findings);
-        for (f, t) in findings.iter_mut().zip(&tests) {
-            f.cause = report::cause(f, t.observable, p.weather);
-        }
-        // Order: significant first; observables by their strongest
-        // significant finding; within one observable by strength, a
-        // dependence seen inside recordings (point level) weighted by
-        // POINT_LEVEL_PREFERENCE over one across recordings: recording means
-        // mix returns whose composition changes with the scan (at low MOR only
-        // near returns survive), so an effect along range also shows along
-        // MOR, a little weaker or stronger.
-        let mut group: BTreeMap<&str, f64> = BTreeMap::new();
-        for f in findings.iter().filter(|f| f.significant) {
-            let g = group.entry(f.observable.as_str()).or_insert(0.0);
-            *g = g.max(f.strength);
-        }
-        let gs = |i: usize| {
-            group
-                .get(findings[i].observable.as_str())
-                .copied()
-                .unwrap_or(0.0)
-        };
-        let score = |i: usize| {
-            let f = &findings[i];
-            if f.significant && f.level == "point" {
-                f.strength * POINT_LEVEL_PREFERENCE
-            } else {
-                f.strength
-            }
-        };
-        let mut idx: Vec<usize> = (0..findings.len()).collect();
-        idx.sort_by(|&a, &b| {
-            findings[b]
-                .significant
-                .cmp(&findings[a].significant)
-                .then(gs(b).total_cmp(&gs(a)))
-                .then(score(b).total_cmp(&score(a)))
-                .then(a.cmp(&b))
-        });
-        let top = idx.first().copied().filter(|&i| findings[i].significant);
-
-        // Extension.
+        let baseline = self.baseline(&loaded, &folds, &sim, &fit_params)?;
+        let baseline_metrics = Metrics::of(&loaded, &baseline.evals);
+        let (tests, findings) = self.attribute(&loaded, &baseline.evals);
+        let order = rank(&findings);
+        let top = order.first().copied().filter(|&i| findings[i].significant);
         let (extended, gain, extended_table) = match top {
             // Nothing to extend along: the table to publish is the
             // baseline itself, so that what follows a diagnosis (`murk apply
@@ -536,112 +526,24 @@ impl DiagnoseValidParams {
                 (None, None, Some(full))
             }
             Some(i) => {
-                let t = &tests[i];
-                let mut ext_evals = Vec::with_capacity(n);
-                for f in 0..k {
-                    let fit_set: Vec<usize> = (0..n).filter(|&j| fold_of[j] != f).collect();
-                    let in_sample = evaluate(
-                        &loaded,
-                        &tables[f],
-                        &fit_set,
-                        (t.observable == ExtensionObservable::Count).then_some(&sim),
-                        &fit_params,
-                    )?;
-                    let binning = self.extension_binning(&loaded, &fit_set, t);
-                    let term = extend::fit_term(
-                        &loaded,
-                        &tables[f],
-                        &in_sample,
-                        t.observable,
-                        &t.covariate,
-                        &binning,
-                    )?;
-                    let mut ext = tables[f].clone();
-                    if let Some(w) = ext.weathers.get_mut(&p.weather) {
-                        w.extensions.push(term);
-                    }
-                    ext_evals.extend(evaluate(&loaded, &ext, &held[f], Some(&sim), &fit_params)?);
-                }
-                ext_evals.sort_by_key(|e| e.rec);
-                let ext_metrics = Metrics::of(&loaded, &ext_evals);
-                // The table to publish: the term fitted on every recording.
-                let all: Vec<usize> = (0..n).collect();
-                let full = match &p.coefficients {
-                    Some(t) => t.clone(),
-                    None => self.fit_on(&loaded, &all, &fit_params, "all recordings")?,
-                };
-                let in_sample = evaluate(
+                let e = self.extend_top(
                     &loaded,
-                    &full,
-                    &all,
-                    (t.observable == ExtensionObservable::Count).then_some(&sim),
+                    &folds,
+                    &baseline,
+                    &baseline_metrics,
+                    &tests[i],
+                    &sim,
                     &fit_params,
                 )?;
-                let binning = self.extension_binning(&loaded, &all, t);
-                let term = extend::fit_term(
-                    &loaded,
-                    &full,
-                    &in_sample,
-                    t.observable,
-                    &t.covariate,
-                    &binning,
-                )?;
-                let mut ext_table = full;
-                if let Some(w) = ext_table.weathers.get_mut(&p.weather) {
-                    w.extensions.push(term.clone());
-                }
-                let (metric, before) = baseline_metrics.of_observable(t.observable);
-                let (_, after) = ext_metrics.of_observable(t.observable);
-                let gain = match (before, after) {
-                    (Some(b), Some(a)) if b > 0.0 => Some(Gain {
-                        metric: metric.to_string(),
-                        before: b,
-                        after: a,
-                        relative: (b - a) / b,
-                    }),
-                    _ => None,
-                };
-                let scene_gain = match (
-                    baseline_metrics.voxel_global_difference,
-                    ext_metrics.voxel_global_difference,
-                ) {
-                    (Some(b), Some(a)) if b > 0.0 => Some(Gain {
-                        metric: "voxel_global_difference".into(),
-                        before: b,
-                        after: a,
-                        relative: (b - a) / b,
-                    }),
-                    _ => None,
-                };
-                (
-                    Some(Extended {
-                        term: format!(
-                            "{} × f({}) — piecewise constant over {} bins, fitted per fold on the fit set",
-                            match t.observable {
-                                ExtensionObservable::Survival => "vanishing distance",
-                                ExtensionObservable::Count => "expected ghost and ring count",
-                                ExtensionObservable::Range => "range of kept returns +",
-                                ExtensionObservable::Intensity => "reflectivity of kept returns",
-                            },
-                            t.covariate,
-                            binning.len()
-                        ),
-                        extension: term,
-                        metrics: ext_metrics,
-                        scene_gain,
-                    }),
-                    gain,
-                    Some(ext_table),
-                )
+                (Some(e.extended), e.gain, Some(e.table))
             }
         };
 
-        let ordered: Vec<Finding> = idx.iter().map(|&i| findings[i].clone()).collect();
         let report = Report {
             format: DIAGNOSIS_FORMAT.to_string(),
             weather: p.weather.to_string(),
             heldout_recordings: n,
-            folds: k,
+            folds: folds.k,
             seed: p.seed,
             skipped: loaded
                 .skipped
@@ -653,18 +555,224 @@ impl DiagnoseValidParams {
                 source: if p.coefficients.is_some() {
                     "the coefficient table given".into()
                 } else {
-                    format!("murk fit per fold on the other {} folds", k - 1)
+                    format!("murk fit per fold on the other {} folds", folds.k - 1)
                 },
                 metrics: baseline_metrics,
             },
-            findings: ordered,
+            findings: order.iter().map(|&i| findings[i].clone()).collect(),
             extended,
             gain,
         };
         Ok(Diagnosis {
             report,
             extended_table,
-            figures: report::FigureData::new(&loaded, &tables[fold_of[0]], 0, sim.seed)?,
+            figures: report::FigureData::new(
+                &loaded,
+                &baseline.tables[folds.fold_of[0]],
+                0,
+                sim.seed,
+            )?,
+        })
+    }
+
+    /// Splits the `n` recordings into `min(folds, n)` folds, at random from
+    /// the seed.
+    fn folds(&self, n: usize) -> Folds {
+        let p = &self.0;
+        let k = p.folds.min(n);
+        let mut order: Vec<usize> = (0..n).collect();
+        order.shuffle(&mut ChaCha8Rng::seed_from_u64(seed_of(
+            p.seed,
+            Purpose::DiagnoseFolds,
+            &["folds"],
+        )));
+        let mut fold_of = vec![0; n];
+        for (pos, &j) in order.iter().enumerate() {
+            fold_of[j] = pos % k;
+        }
+        Folds { k, fold_of }
+    }
+
+    /// The baseline of each fold (fitted on the other folds, or the table
+    /// given) and its evaluation on the fold's held-out recordings.
+    fn baseline(
+        &self,
+        loaded: &Loaded,
+        folds: &Folds,
+        sim: &SimOptions,
+        fit_params: &FitValidParams,
+    ) -> Result<Baseline, DiagnoseError> {
+        let p = &self.0;
+        let n = folds.fold_of.len();
+        let mut tables = Vec::with_capacity(folds.k);
+        let mut held = Vec::with_capacity(folds.k);
+        let mut evals: Vec<RecEval> = Vec::with_capacity(n);
+        for f in 0..folds.k {
+            let table = match &p.coefficients {
+                Some(t) => t.clone(),
+                None => self.fit_on(
+                    loaded,
+                    &folds.fit_set(f),
+                    fit_params,
+                    &format!("fold {}", f + 1),
+                )?,
+            };
+            let out = folds.held_out(f);
+            evals.extend(evaluate(loaded, &table, &out, Some(sim), fit_params)?);
+            tables.push(table);
+            held.push(out);
+        }
+        evals.sort_by_key(|e| e.rec);
+        Ok(Baseline {
+            tables,
+            held,
+            evals,
+        })
+    }
+
+    /// Attribution: every (observable, covariate) test on the held-out
+    /// residuals, Holm-adjusted, covariates that only echo a stronger one
+    /// explained away, each with its plain-language cause. Tests and
+    /// findings in the same (test) order.
+    fn attribute(&self, loaded: &Loaded, evals: &[RecEval]) -> (Vec<Test>, Vec<Finding>) {
+        let p = &self.0;
+        let res = residuals(loaded, evals);
+        let mut tests = self.tests(loaded, evals, &res);
+        let pvals: Vec<f64> = tests.iter().map(|t| t.outcome.p_value).collect();
+        let adjusted = holm(&pvals);
+        let mut findings: Vec<Finding> = tests
+            .iter()
+            .zip(&adjusted)
+            .map(|(t, &padj)| {
+                let threshold = p.relevance.of(t.observable);
+                let strength = if threshold > 0.0 {
+                    t.outcome.strength / threshold
+                } else {
+                    t.outcome.strength
+                };
+                Finding {
+                    observable: t.observable,
+                    covariate: t.covariate.clone(),
+                    strength,
+                    significant: padj < p.alpha && t.outcome.strength >= threshold,
+                    cause: String::new(),
+                    level: if t.point_level {
+                        Level::Point
+                    } else {
+                        Level::Scan
+                    },
+                    effect: t.outcome.strength,
+                    relevance_threshold: threshold,
+                    p_value: t.outcome.p_value,
+                    p_adjusted: padj,
+                    recordings: t.outcome.recordings,
+                    explained_by: None,
+                    profile: t.outcome.profile.clone(),
+                }
+            })
+            .collect();
+        // Covariates echoing the top finding of their observable.
+        self.explain_away(loaded, evals, &res, &mut tests, &mut findings);
+        for f in findings.iter_mut() {
+            f.cause = report::cause(f, p.weather);
+        }
+        (tests, findings)
+    }
+
+    /// The extension of the top finding's test `t`: its term fitted per fold
+    /// on the fit set and evaluated on the held-out recordings (the gain),
+    /// and fitted once on every recording (the extended table).
+    #[allow(clippy::too_many_arguments)]
+    fn extend_top(
+        &self,
+        loaded: &Loaded,
+        folds: &Folds,
+        baseline: &Baseline,
+        baseline_metrics: &Metrics,
+        t: &Test,
+        sim: &SimOptions,
+        fit_params: &FitValidParams,
+    ) -> Result<Extension, DiagnoseError> {
+        let p = &self.0;
+        let n = folds.fold_of.len();
+        // Counts need simulated near-range returns in sample too.
+        let in_sample_sim = (t.observable == ExtensionObservable::Count).then_some(sim);
+        let mut ext_evals = Vec::with_capacity(n);
+        for f in 0..folds.k {
+            let fit_set = folds.fit_set(f);
+            let table = &baseline.tables[f];
+            let in_sample = evaluate(loaded, table, &fit_set, in_sample_sim, fit_params)?;
+            let binning = self.extension_binning(loaded, &fit_set, t);
+            let term = extend::fit_term(
+                loaded,
+                table,
+                &in_sample,
+                t.observable,
+                &t.covariate,
+                &binning,
+            )?;
+            let mut ext = table.clone();
+            if let Some(w) = ext.weathers.get_mut(&p.weather) {
+                w.extensions.push(term);
+            }
+            ext_evals.extend(evaluate(
+                loaded,
+                &ext,
+                &baseline.held[f],
+                Some(sim),
+                fit_params,
+            )?);
+        }
+        ext_evals.sort_by_key(|e| e.rec);
+        let ext_metrics = Metrics::of(loaded, &ext_evals);
+        // The table to publish: the term fitted on every recording.
+        let all: Vec<usize> = (0..n).collect();
+        let full = match &p.coefficients {
+            Some(t) => t.clone(),
+            None => self.fit_on(loaded, &all, fit_params, "all recordings")?,
+        };
+        let in_sample = evaluate(loaded, &full, &all, in_sample_sim, fit_params)?;
+        let binning = self.extension_binning(loaded, &all, t);
+        let term = extend::fit_term(
+            loaded,
+            &full,
+            &in_sample,
+            t.observable,
+            &t.covariate,
+            &binning,
+        )?;
+        let mut table = full;
+        if let Some(w) = table.weathers.get_mut(&p.weather) {
+            w.extensions.push(term.clone());
+        }
+        let (metric, before) = baseline_metrics.of_observable(t.observable);
+        let (_, after) = ext_metrics.of_observable(t.observable);
+        let gain = relative_gain(metric, before, after);
+        let scene_gain = relative_gain(
+            "voxel_global_difference",
+            baseline_metrics.voxel_global_difference,
+            ext_metrics.voxel_global_difference,
+        );
+        let extended = Extended {
+            term: format!(
+                "{} × f({}) — piecewise constant over {} bins, fitted per fold on the fit set",
+                match t.observable {
+                    ExtensionObservable::Survival => "vanishing distance",
+                    ExtensionObservable::Count => "expected ghost and ring count",
+                    ExtensionObservable::Range => "range of kept returns +",
+                    ExtensionObservable::Intensity => "reflectivity of kept returns",
+                },
+                t.covariate,
+                binning.len()
+            ),
+            extension: term,
+            metrics: ext_metrics,
+            scene_gain,
+        };
+        Ok(Extension {
+            extended,
+            gain,
+            table,
         })
     }
 
@@ -732,7 +840,7 @@ impl DiagnoseValidParams {
         specs
             .par_iter()
             .filter_map(|(obs, cov, point)| {
-                let seed = seed_of(p.seed, &["test", obs.name(), cov]);
+                let seed = seed_of(p.seed, Purpose::DiagnoseTest, &["test", obs.name(), cov]);
                 if *point {
                     let units: Vec<(usize, f64, f64, f64)> = res
                         .points
@@ -873,6 +981,7 @@ impl DiagnoseValidParams {
         let nrec = evals.len();
         let seed = seed_of(
             p.seed,
+            Purpose::DiagnoseTest,
             &["retest", a.observable.name(), &a.covariate, &b.covariate],
         );
         let labels = b.binning.labels();

@@ -2,7 +2,7 @@
 //! causes.
 
 use murk_types::{CoefficientTable, ExtensionObservable, ModelExtension, WeatherClass};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::DiagnoseError;
 use crate::Relevance;
@@ -22,11 +22,39 @@ pub struct ModelMetrics {
     pub metrics: Metrics,
 }
 
+/// Where a covariate varies, and so how its test is run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Level {
+    /// Point by point inside recordings (range, reflectivity, ring,
+    /// elevation, azimuth): residuals are compared within each recording.
+    Point,
+    /// Once per recording (MOR, time, a `weather.csv` column): recordings
+    /// are compared with each other.
+    Scan,
+}
+
+impl Level {
+    /// The name used in reports (`point`, `scan`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Level::Point => "point",
+            Level::Scan => "scan",
+        }
+    }
+}
+
+impl std::fmt::Display for Level {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
 /// One (observable, covariate) test.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Finding {
     /// `survival`, `count`, `range` or `intensity`.
-    pub observable: String,
+    pub observable: ExtensionObservable,
     /// A point-level name, `mor`, `timestamp` or a `weather.csv` header.
     pub covariate: String,
     /// Effect size in multiples of the observable's relevance threshold.
@@ -37,7 +65,7 @@ pub struct Finding {
     /// Plain-language cause.
     pub cause: String,
     /// `point` or `scan`.
-    pub level: String,
+    pub level: Level,
     /// Effect size in the residual's unit (RMS of the profile beyond chance).
     pub effect: f64,
     /// The observable's relevance threshold, same unit.
@@ -50,7 +78,7 @@ pub struct Finding {
     pub recordings: usize,
     /// The stronger covariate that explains this dependence, when re-testing
     /// after removing it left nothing.
-    #[serde(skip_serializing_if = "Option::is_none")]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub explained_by: Option<String>,
     /// Mean residual per bin of the covariate.
     pub profile: Vec<ProfileBin>,
@@ -203,7 +231,8 @@ fn trend(f: &Finding) -> Option<f64> {
 }
 
 /// The plain-language cause of a finding.
-pub fn cause(f: &Finding, obs: ExtensionObservable, weather: WeatherClass) -> String {
+pub fn cause(f: &Finding, weather: WeatherClass) -> String {
+    let obs = f.observable;
     if let Some(by) = &f.explained_by {
         return format!(
             "{} follows {:?} only as far as {:?} does: nothing is left after removing the {by:?} profile",
@@ -264,5 +293,74 @@ pub fn cause(f: &Finding, obs: ExtensionObservable, weather: WeatherClass) -> St
     match known {
         Some(k) => format!("{k} ({dep})"),
         None => dep,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The typed `observable` and `level` write the strings the report has
+    /// always carried, and a finding reads back from its JSON unchanged.
+    #[test]
+    fn a_finding_round_trips_with_the_report_strings() {
+        let mut expected = Vec::new();
+        for (observable, level, obs_name, level_name) in [
+            (
+                ExtensionObservable::Survival,
+                Level::Point,
+                "survival",
+                "point",
+            ),
+            (ExtensionObservable::Count, Level::Scan, "count", "scan"),
+            (ExtensionObservable::Range, Level::Point, "range", "point"),
+            (
+                ExtensionObservable::Intensity,
+                Level::Scan,
+                "intensity",
+                "scan",
+            ),
+        ] {
+            let f = Finding {
+                observable,
+                covariate: "Road state".into(),
+                strength: 2.5,
+                significant: true,
+                cause: "wet road".into(),
+                level,
+                effect: 0.05,
+                relevance_threshold: 0.02,
+                p_value: 0.001,
+                p_adjusted: 0.01,
+                recordings: 12,
+                explained_by: None,
+                profile: vec![ProfileBin {
+                    label: "wet".into(),
+                    center: None,
+                    mean_residual: 0.04,
+                    weight: 300.0,
+                    recordings: 6,
+                }],
+            };
+            let json = serde_json::to_value(&f).unwrap();
+            let want = serde_json::json!({
+                "observable": obs_name, "covariate": "Road state", "strength": 2.5,
+                "significant": true, "cause": "wet road", "level": level_name,
+                "effect": 0.05, "relevance_threshold": 0.02, "p_value": 0.001,
+                "p_adjusted": 0.01, "recordings": 12,
+                "profile": [{"label": "wet", "mean_residual": 0.04, "weight": 300.0,
+                             "recordings": 6}],
+            });
+            assert_eq!(json, want);
+            assert_eq!(serde_json::from_value::<Finding>(json).unwrap(), f);
+            assert_eq!(observable.to_string(), obs_name);
+            assert_eq!(level.to_string(), level_name);
+            expected.push(f);
+        }
+        let text = serde_json::to_string(&expected).unwrap();
+        assert_eq!(
+            serde_json::from_str::<Vec<Finding>>(&text).unwrap(),
+            expected
+        );
     }
 }

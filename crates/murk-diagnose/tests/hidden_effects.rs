@@ -89,7 +89,7 @@ fn expect_top(d: &Diagnosis, observable: &str, covariate: &str, min_gain: f64) {
         .top()
         .unwrap_or_else(|| panic!("no significant finding; top five: {summary:#?}"));
     assert_eq!(
-        (top.observable.as_str(), top.covariate.as_str()),
+        (top.observable.name(), top.covariate.as_str()),
         (observable, covariate),
         "top five: {summary:#?}"
     );

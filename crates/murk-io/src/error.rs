@@ -118,6 +118,33 @@ pub enum IoError {
         /// Whole records in the file.
         points: u64,
     },
+    /// A headerless binary file whose layout the reader cannot tell from its
+    /// size and was not told (`--bin-layout`, `bin_layout` in
+    /// `campaign.toml`).
+    #[error(
+        "{path}: size {size} bytes fits {fits}: {why}; say which with --bin-layout xyzi|xyzir|xyzit (bin_layout in campaign.toml [lidar])"
+    )]
+    AmbiguousLayout {
+        /// The file.
+        path: PathBuf,
+        /// File size in bytes.
+        size: u64,
+        /// The layouts the size fits, in words.
+        fits: String,
+        /// Why none of them was taken.
+        why: String,
+    },
+    /// A CSV file whose first line is numbers, not column names, read
+    /// without declared columns.
+    #[error(
+        "{path}: line 1 ({first_line}) is data, not a header: give the columns with --columns, e.g. --columns x,y,z,intensity,ring (csv_columns in campaign.toml [lidar])"
+    )]
+    NoHeader {
+        /// The file.
+        path: PathBuf,
+        /// The first line's cells, comma separated.
+        first_line: String,
+    },
     /// A field (PCD) or column (CSV, Parquet) the reader needs is absent.
     #[error("{path}: no {field} field/column (found: {found})")]
     MissingField {
@@ -158,12 +185,15 @@ pub enum IoError {
     },
     /// A Velodyne capture could not be decoded (the decoder's error names
     /// the file, the packet index and its byte offset).
-    #[error("{source}")]
+    ///
+    /// The decoder's error is the message, not a `source`: an error chain
+    /// printer (`anyhow`'s `{:#}`) would otherwise print it twice.
+    #[error("{reason}")]
     Pcap {
         /// The file.
         path: PathBuf,
         /// What the decoder reported.
-        source: murk_velodyne::VelodyneError,
+        reason: murk_velodyne::VelodyneError,
     },
     /// The format is unknown, or murk cannot write it (pcap).
     #[error("{path}: {reason}")]

@@ -2,7 +2,7 @@
 
 use std::path::Path;
 
-use murk_types::{IntensityScale, LidarSpec, PointFormat};
+use murk_types::{BinLayout, IntensityScale, LidarSpec, PointFormat};
 
 use crate::IoError;
 
@@ -12,7 +12,9 @@ use crate::IoError;
 /// |---|---|---|
 /// | `format` | from the extension ([`PointFormat::from_path`]) | force a format |
 /// | `lidar` | [`LidarSpec::vlp16`] | ring elevations for files without a ring (KITTI `.bin`, CSV/PCD/Parquet without ring) |
-/// | `intensity_scale` | `lidar.intensity_scale`, else [`PointFormat::default_intensity_scale`] | the scale the file's intensity is in |
+/// | `intensity_scale` | `lidar.intensity_scale`, else what the file records (a murk PCD's `# intensity_scale` comment), else the format's / layout's default | the scale the file's intensity is in |
+/// | `bin_layout` | `lidar.bin_layout`, else decided from the file size (see [`crate::parse_kitti`]) | record layout of `.bin` / `.pcd.bin` files |
+/// | `csv_columns` | `lidar.csv_columns`, else none: the first line is the header | column names of a header-less CSV file |
 ///
 /// Readers never convert intensity: they label the returned cloud with the
 /// scale and callers call [`murk_types::PointCloud::to_calibrated`].
@@ -24,6 +26,13 @@ pub struct ReadOptions {
     pub lidar: Option<LidarSpec>,
     /// Scale of the file's intensity (overrides the format's default).
     pub intensity_scale: Option<IntensityScale>,
+    /// Record layout of headerless binary files (overrides the sensor
+    /// description's and the size-based choice).
+    pub bin_layout: Option<BinLayout>,
+    /// Column names of header-less CSV files, in file order (`x`, `y`, `z`,
+    /// `intensity` required; `ring`, `time` optional; any other name is a
+    /// column murk keeps but does not read).
+    pub csv_columns: Option<Vec<String>>,
 }
 
 impl ReadOptions {
@@ -40,9 +49,31 @@ impl ReadOptions {
 
     /// The intensity scale a cloud read as `format` is labelled with.
     pub fn scale_for(&self, format: PointFormat) -> IntensityScale {
+        self.declared_scale()
+            .unwrap_or_else(|| format.default_intensity_scale())
+    }
+
+    /// The intensity scale the caller declared (the option, else the sensor
+    /// description's), if any: it wins over what a file records and over a
+    /// format's default.
+    pub fn declared_scale(&self) -> Option<IntensityScale> {
         self.intensity_scale
             .or_else(|| self.lidar.as_ref().and_then(|l| l.intensity_scale))
-            .unwrap_or_else(|| format.default_intensity_scale())
+    }
+
+    /// The binary record layout the caller declared (the option, else the
+    /// sensor description's), if any.
+    pub fn declared_bin_layout(&self) -> Option<BinLayout> {
+        self.bin_layout
+            .or_else(|| self.lidar.as_ref().and_then(|l| l.bin_layout))
+    }
+
+    /// The column names of header-less CSV files the caller declared (the
+    /// option, else the sensor description's), if any.
+    pub fn declared_csv_columns(&self) -> Option<&[String]> {
+        self.csv_columns
+            .as_deref()
+            .or_else(|| self.lidar.as_ref().and_then(|l| l.csv_columns.as_deref()))
     }
 }
 

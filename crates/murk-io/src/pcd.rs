@@ -12,10 +12,10 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use murk_types::PointCloud;
+use murk_types::{IntensityScale, PointCloud};
 
 use crate::columns::{self, Field, Layout, Scalar};
-use crate::{IoError, PcdData, ReadOptions, ring_lookup};
+use crate::{IoError, PcdData, ReadNotes, ReadOptions, ScaleSource, ring_lookup};
 
 /// LZF never expands more than this: a 3-byte back reference yields at most
 /// 264 bytes. A header claiming more is refused before anything is allocated.
@@ -50,6 +50,40 @@ struct Header<'a> {
     data_start: usize,
     /// 1-based line number of the `DATA` line.
     data_line: usize,
+    /// The scale a `# murk: intensity_scale …` comment records.
+    scale: Option<IntensityScale>,
+}
+
+/// The comment murk writes to record a cloud's intensity scale (PCD has no
+/// field for it; comments are part of the format and other readers skip
+/// them): `# murk: intensity_scale kitti`, or `… gain G offset O`.
+const SCALE_COMMENT: &str = "# murk: intensity_scale";
+
+/// The value of [`SCALE_COMMENT`] for `scale`.
+fn scale_comment(scale: IntensityScale) -> String {
+    match scale {
+        IntensityScale::Linear { gain, offset }
+            if scale != IntensityScale::KITTI && scale != IntensityScale::SIX_BIT =>
+        {
+            format!("gain {gain} offset {offset}")
+        }
+        s => s.describe(),
+    }
+}
+
+/// Parses the value of a [`SCALE_COMMENT`].
+fn parse_scale_comment(value: &str) -> Result<IntensityScale, String> {
+    let tokens: Vec<&str> = value.split_ascii_whitespace().collect();
+    match tokens[..] {
+        [name] => IntensityScale::from_name(name).map_err(|e| e.to_string()),
+        ["gain", g, "offset", o] => match (g.parse::<f32>(), o.parse::<f32>()) {
+            (Ok(g), Ok(o)) => IntensityScale::linear(g, o).map_err(|e| e.to_string()),
+            _ => Err(format!("{value:?}: gain and offset must be numbers")),
+        },
+        _ => Err(format!(
+            "{value:?} is not a scale name or `gain G offset O`"
+        )),
+    }
 }
 
 /// A header keyword's values and line.
@@ -94,6 +128,7 @@ fn parse_header<'a>(bytes: &'a [u8], path: &Path) -> Result<Header<'a>, IoError>
     let mut entries: [Option<Entry<'a>>; 9] = Default::default();
     let mut pos = 0usize;
     let mut line = 0usize;
+    let mut scale = None;
     let (data, data_start, data_line) = loop {
         if pos >= bytes.len() {
             return Err(header_err(
@@ -111,6 +146,12 @@ fn parse_header<'a>(bytes: &'a [u8], path: &Path) -> Result<Header<'a>, IoError>
         let text = std::str::from_utf8(raw)
             .map_err(|_| header_err(path, line, "header line is not UTF-8 text"))?
             .trim();
+        if let Some(value) = text.strip_prefix(SCALE_COMMENT) {
+            scale = Some(parse_scale_comment(value.trim()).map_err(|e| {
+                header_err(path, line, format!("murk's intensity_scale comment: {e}"))
+            })?);
+            continue;
+        }
         if text.is_empty() || text.starts_with('#') {
             continue;
         }
@@ -271,6 +312,7 @@ fn parse_header<'a>(bytes: &'a [u8], path: &Path) -> Result<Header<'a>, IoError>
         data,
         data_start,
         data_line,
+        scale,
     })
 }
 
@@ -353,6 +395,17 @@ fn wanted(path: &Path, h: &Header) -> Result<Wanted, IoError> {
 /// `source` names the file in errors. See the [module docs](crate) for how
 /// `opts` supplies rings and the intensity scale.
 pub fn parse_pcd(bytes: &[u8], source: &Path, opts: &ReadOptions) -> Result<PointCloud, IoError> {
+    parse_pcd_noted(bytes, source, opts).map(|(c, _)| c)
+}
+
+/// [`parse_pcd`] with what the caller should be told: where the intensity
+/// scale came from (the option, murk's header comment, or the default) and
+/// the fields the cloud does not carry.
+pub(crate) fn parse_pcd_noted(
+    bytes: &[u8],
+    source: &Path,
+    opts: &ReadOptions,
+) -> Result<(PointCloud, ReadNotes), IoError> {
     if bytes.is_empty() {
         return Err(IoError::Empty {
             path: source.to_path_buf(),
@@ -360,7 +413,39 @@ pub fn parse_pcd(bytes: &[u8], source: &Path, opts: &ReadOptions) -> Result<Poin
     }
     let h = parse_header(bytes, source)?;
     let want = wanted(source, &h)?;
-    let scale = opts.scale_for(murk_types::PointFormat::Pcd);
+    let (scale, scale_source) = match (opts.declared_scale(), h.scale) {
+        (Some(s), _) => (s, ScaleSource::Declared),
+        (None, Some(s)) => (s, ScaleSource::File),
+        (None, None) => (
+            opts.scale_for(murk_types::PointFormat::Pcd),
+            ScaleSource::Default,
+        ),
+    };
+    let notes = ReadNotes {
+        scale_source,
+        dropped_fields: h
+            .fields
+            .iter()
+            .filter(|f| {
+                !f.is_padding()
+                    && !matches!(f.name, "x" | "y" | "z" | "intensity" | "ring" | "time")
+            })
+            .map(|f| f.name.to_string())
+            .collect(),
+        ..ReadNotes::default()
+    };
+    parse_pcd_data(bytes, source, opts, &h, &want, scale).map(|c| (c, notes))
+}
+
+/// The data section of a PCD file whose header is `h`.
+fn parse_pcd_data(
+    bytes: &[u8],
+    source: &Path,
+    opts: &ReadOptions,
+    h: &Header,
+    want: &Wanted,
+    scale: IntensityScale,
+) -> Result<PointCloud, IoError> {
     let lookup = match want.ring {
         Some(_) => None,
         None => Some(ring_lookup(source, opts)?),
@@ -374,7 +459,7 @@ pub fn parse_pcd(bytes: &[u8], source: &Path, opts: &ReadOptions) -> Result<Poin
         reason,
     };
     match h.data {
-        PcdData::Ascii => parse_ascii(source, &h, &want, data, lookup.as_ref(), scale),
+        PcdData::Ascii => parse_ascii(source, h, want, data, lookup.as_ref(), scale),
         PcdData::Binary => {
             let step: usize = h.fields.iter().map(PcdField::bytes).sum();
             let need = n.checked_mul(step);
@@ -633,9 +718,14 @@ fn header(cloud: &PointCloud, data: PcdData) -> String {
     let s = if timed { " 4" } else { "" };
     let ty = if timed { " F" } else { "" };
     let c = if timed { " 1" } else { "" };
+    let comment = if cloud.intensity_scale == IntensityScale::Calibrated {
+        String::new()
+    } else {
+        format!("{SCALE_COMMENT} {}\n", scale_comment(cloud.intensity_scale))
+    };
     format!(
         "# .PCD v0.7 - Point Cloud Data file format\n\
-         VERSION 0.7\n\
+         {comment}VERSION 0.7\n\
          FIELDS x y z intensity ring{t}\n\
          SIZE 4 4 4 4 2{s}\n\
          TYPE F F F F U{ty}\n\

@@ -108,15 +108,34 @@ pub fn parse_csv(bytes: &[u8], source: &Path, opts: &ReadOptions) -> Result<Poin
     }
 }
 
+/// The columns of a CSV file that a cloud does not carry (every column but
+/// the ones murk reads); empty when the header cannot be read (the parse
+/// reports that).
+pub(crate) fn extra_columns(bytes: &[u8], source: &Path, opts: &ReadOptions) -> Vec<String> {
+    let text = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
+    match parse_header(text, source, opts.declared_csv_columns()) {
+        Ok(h) => h
+            .names
+            .iter()
+            .enumerate()
+            .filter(|(j, _)| !h.col.contains(&Some(*j)))
+            .map(|(_, n)| n.clone())
+            .collect(),
+        Err(_) => Vec::new(),
+    }
+}
+
 /// Which optional columns [`parse_csv_rows`] decodes (x, y, z and intensity
 /// always are).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct CsvNeeds {
-    /// Decode the ring (from its column, else from elevation). When false the
-    /// cloud's ring is 0 for every point and ring cells are not checked.
+    /// Decode the ring (from its column, else from elevation). When false
+    /// and the file has no ring column, the cloud's ring is 0 for every
+    /// point (no derivation from elevation). Ring cells are checked either
+    /// way: a file `murk convert` refuses (ring 70000) is refused here too.
     pub ring: bool,
     /// Decode the time column when there is one. When false the cloud has
-    /// no time and time cells are not checked.
+    /// no time; time cells are still checked (finite numbers).
     pub time: bool,
 }
 
@@ -184,6 +203,12 @@ pub struct RowEdit {
     pub row: usize,
     /// New x, y, z and intensity of the point.
     pub values: [f32; 4],
+    /// True when the point is a new return on the row's ray (a near-range
+    /// echo replacing the original): its ring and time cells are kept,
+    /// every other column not read by murk (labels, colours) is left
+    /// **empty**, as for added points. False for the same return moved or
+    /// rescaled (range noise, attenuation): all its other cells are kept.
+    pub fresh: bool,
 }
 
 /// The byte ranges of the data rows in `bytes[range]` (blank lines
@@ -322,7 +347,9 @@ impl CsvRows {
     /// `bytes`, so a mostly kept file goes out in a few large writes); a row
     /// in `edits` (sorted by row, kept rows only) has its x, y, z and
     /// intensity cells rewritten (shortest decimal that reads back to the
-    /// same `f32`), its other cells kept. Added points get x, y, z,
+    /// same `f32`), its other cells kept, except for a
+    /// [`RowEdit::fresh`] point, whose cells of the columns murk does not
+    /// read are left empty. Added points get x, y, z,
     /// intensity, ring and time cells (time in the file's own origin) and
     /// empty cells in every other column. Blank lines are not written.
     pub fn write_subset<W: std::io::Write + ?Sized>(
@@ -351,7 +378,7 @@ impl CsvRows {
                 if e < edits.len() && edits[e].row == i {
                     flush_run(out, bytes, &mut run, &mut ends_with_newline)?;
                     scratch.clear();
-                    self.rewrite_row(&mut scratch, &bytes[row.clone()], &edits[e].values);
+                    self.rewrite_row(&mut scratch, &bytes[row.clone()], &edits[e]);
                     out.write_all(&scratch)?;
                     ends_with_newline = scratch.ends_with(b"\n");
                     e += 1;
@@ -397,8 +424,10 @@ impl CsvRows {
         Ok(())
     }
 
-    /// Appends `row` with its x, y, z and intensity cells replaced.
-    fn rewrite_row(&self, out: &mut Vec<u8>, row: &[u8], values: &[f32; 4]) {
+    /// Appends `row` with its x, y, z and intensity cells replaced (and,
+    /// for a fresh point, its cells of unread columns emptied).
+    fn rewrite_row(&self, out: &mut Vec<u8>, row: &[u8], edit: &RowEdit) {
+        let values = &edit.values;
         let body = strip_newline(row);
         let mut cell = String::new();
         for (j, c) in body.split(|&b| b == b',').enumerate() {
@@ -411,6 +440,9 @@ impl CsvRows {
                     let _ = write!(cell, "{}", values[f]);
                     out.extend_from_slice(cell.as_bytes());
                 }
+                None if edit.fresh
+                    && self.column_of[4] != Some(j)
+                    && self.column_of[5] != Some(j) => {}
                 None => out.extend_from_slice(c),
             }
         }
@@ -446,18 +478,26 @@ fn csv_err(source: &Path) -> impl Fn(csv::Error) -> IoError + '_ {
     }
 }
 
-fn reader(bytes: &[u8]) -> csv::Reader<&[u8]> {
+fn reader(bytes: &[u8], has_headers: bool) -> csv::Reader<&[u8]> {
     csv::ReaderBuilder::new()
-        .has_headers(true)
+        .has_headers(has_headers)
         .trim(csv::Trim::All)
         .from_reader(bytes)
 }
 
 /// Reads the header (with the `csv` crate: it may be quoted) and picks the
-/// column of every field.
-fn parse_header(bytes: &[u8], source: &Path) -> Result<Header, IoError> {
-    let mut rdr = reader(bytes);
-    let headers = rdr.byte_headers().map_err(csv_err(source))?.clone();
+/// column of every field; with `declared` column names (a header-less file)
+/// the names are those and the data start at the first line.
+fn parse_header(
+    bytes: &[u8],
+    source: &Path,
+    declared: Option<&[String]>,
+) -> Result<Header, IoError> {
+    let mut rdr = reader(bytes, true);
+    let headers = match declared {
+        Some(names) => csv::ByteRecord::from(names.to_vec()),
+        None => rdr.byte_headers().map_err(csv_err(source))?.clone(),
+    };
     let mut names = Vec::with_capacity(headers.len());
     // Column index and precedence of each field.
     let mut chosen: [Option<(usize, u8)>; 6] = [None; 6];
@@ -494,12 +534,29 @@ fn parse_header(bytes: &[u8], source: &Path) -> Result<Header, IoError> {
     let col = chosen.map(|c| c.map(|(j, _)| j));
     for f in 0..4 {
         if col[f].is_none() {
+            if declared.is_none()
+                && !names.is_empty()
+                && names.iter().all(|n| n.trim().parse::<f64>().is_ok())
+            {
+                return Err(IoError::NoHeader {
+                    path: source.to_path_buf(),
+                    first_line: names.join(","),
+                });
+            }
             return Err(IoError::MissingField {
                 path: source.to_path_buf(),
                 field: FIELDS[f],
                 found: names.join(", "),
             });
         }
+    }
+    if declared.is_some() {
+        return Ok(Header {
+            names,
+            col,
+            data_start: 0,
+            data_line: 1,
+        });
     }
     let pos = rdr.position();
     let mut data_start = (pos.byte() as usize).min(bytes.len());
@@ -752,13 +809,7 @@ struct PieceParser<'a> {
 }
 
 impl<'a> PieceParser<'a> {
-    fn new(
-        data: &'a [u8],
-        range: Range<usize>,
-        roles: &'a [Role],
-        names: &'a [String],
-        needs: CsvNeeds,
-    ) -> Self {
+    fn new(data: &'a [u8], range: Range<usize>, roles: &'a [Role], names: &'a [String]) -> Self {
         // Rows the piece holds, from the length of its first lines (an
         // eighth more for longer-than-average lines further on): room for
         // every row without a reallocation, and without reserving far more
@@ -776,8 +827,10 @@ impl<'a> PieceParser<'a> {
             row: 0,
             roles,
             names,
-            want_ring: needs.ring && roles.contains(&Role::Ring),
-            want_time: needs.time && roles.contains(&Role::Time),
+            // Checked whatever the caller decodes: every reader of murk
+            // accepts and refuses the same files.
+            want_ring: roles.contains(&Role::Ring),
+            want_time: roles.contains(&Role::Time),
             record_ends,
             out: PieceCols {
                 rows: Vec::with_capacity(cap),
@@ -966,10 +1019,9 @@ fn parse_pair(
     b: Range<usize>,
     roles: &[Role],
     names: &[String],
-    needs: CsvNeeds,
 ) -> [Result<PieceCols, PieceErr>; 2] {
-    let mut pa = PieceParser::new(data, a, roles, names, needs);
-    let mut pb = PieceParser::new(data, b, roles, names, needs);
+    let mut pa = PieceParser::new(data, a, roles, names);
+    let mut pb = PieceParser::new(data, b, roles, names);
     while pa.skip_blank() && pb.skip_blank() {
         let Some((ra, rb)) = fast_row_pair(
             &data[..pa.range.end],
@@ -993,9 +1045,8 @@ fn parse_piece(
     range: Range<usize>,
     roles: &[Role],
     names: &[String],
-    needs: CsvNeeds,
 ) -> Result<PieceCols, PieceErr> {
-    PieceParser::new(data, range, roles, names, needs).finish()
+    PieceParser::new(data, range, roles, names).finish()
 }
 
 /// Parses a CSV point cloud held in memory and keeps where its rows are, or
@@ -1020,7 +1071,7 @@ pub fn parse_csv_rows(
         0
     };
     let text = &bytes[bom..];
-    let h = parse_header(text, source)?;
+    let h = parse_header(text, source, opts.declared_csv_columns())?;
     let data = &text[h.data_start..];
     // Quoted cells, or a lone `\r` (which the `csv` crate takes as a line
     // break): the `csv` crate's path.
@@ -1061,15 +1112,8 @@ pub fn parse_csv_rows(
     let parsed: Vec<Result<PieceCols, PieceErr>> = ranges
         .par_chunks(2)
         .flat_map_iter(|pair| match pair {
-            [a, b] => Vec::from(parse_pair(
-                data,
-                a.clone(),
-                b.clone(),
-                &roles,
-                &h.names,
-                needs,
-            )),
-            _ => vec![parse_piece(data, pair[0].clone(), &roles, &h.names, needs)],
+            [a, b] => Vec::from(parse_pair(data, a.clone(), b.clone(), &roles, &h.names)),
+            _ => vec![parse_piece(data, pair[0].clone(), &roles, &h.names)],
         })
         .collect();
 
@@ -1122,7 +1166,7 @@ pub fn parse_csv_rows(
         time: None,
         intensity_scale: opts.scale_for(PointFormat::Csv),
     };
-    cloud.ring = match (&lookup, needs.ring && h.col[4].is_some()) {
+    cloud.ring = match (&lookup, h.col[4].is_some()) {
         (Some(lookup), _) => {
             let mut ring = vec![0u16; total];
             ring.par_chunks_mut(PIECE)
@@ -1184,15 +1228,18 @@ fn parse_csv_quoted(
     opts: &ReadOptions,
 ) -> Result<PointCloud, IoError> {
     let bytes = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
-    let h = parse_header(bytes, source)?;
+    let declared = opts.declared_csv_columns();
+    let h = parse_header(bytes, source, declared)?;
     let names = &h.names;
     let col = h.col;
     let req = [0, 1, 2, 3].map(|f| col[f].expect("checked by parse_header"));
-    let mut rdr = reader(bytes);
+    let mut rdr = reader(bytes, declared.is_none());
     let csv_err = csv_err(source);
     let parse_err =
         |line: u64, column: &str, reason: String| parse_err(source, line, column, reason);
-    rdr.byte_headers().map_err(&csv_err)?;
+    if declared.is_none() {
+        rdr.byte_headers().map_err(&csv_err)?;
+    }
     let lookup = match col[4] {
         Some(_) => None,
         None => Some(ring_lookup(source, opts)?),
@@ -1572,14 +1619,20 @@ mod tests {
         .unwrap()
         .unwrap();
         assert_eq!(rows.time_origin, 1_700_000_000.5);
-        let edit = RowEdit {
+        let mut edit = RowEdit {
             row: 2,
             values: [1.5, -0.25, 0.1, 3.0],
+            fresh: false,
         };
         let mut added = PointCloud::default();
         added.push_timed(2.0, 0.0, 0.5, 4.0, 7, 0.25);
         let out = rows.encode_subset(text, &[1, 0, 1], &[edit], Some(&added));
         let want = "ring,x,y,z,intensity,time,note\r\n3,10,0,0,7,1700000000.5,a b\r\n5,1.5,-0.25,0.1,3,1700000001,d\r\n7,2,0,0.5,4,1700000000.75,\r\n";
+        assert_eq!(String::from_utf8(out).unwrap(), want);
+        // A fresh point on the row's ray keeps ring and time, not the note.
+        edit.fresh = true;
+        let out = rows.encode_subset(text, &[1, 0, 1], &[edit], None);
+        let want = "ring,x,y,z,intensity,time,note\r\n3,10,0,0,7,1700000000.5,a b\r\n5,1.5,-0.25,0.1,3,1700000001,";
         assert_eq!(String::from_utf8(out).unwrap(), want);
     }
 

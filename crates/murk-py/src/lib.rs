@@ -3,14 +3,14 @@
 //! A thin layer over the library crates' public APIs — murk-io's readers and
 //! writers, murk-types' [`CoefficientTable`], murk-infer's
 //! [`ApplyParams`] → [`murk_infer::Applier`], murk-fit's
-//! [`FitParams`] → `fit`, murk-diagnose's `run` — with numpy arrays in and
+//! [`murk_fit::FitParams`] → `fit`, murk-diagnose's `run` — with numpy arrays in and
 //! out. The Python side (`python/murk/__init__.py`) re-exports these names
 //! and adds `Augment`; `python/murk/__init__.pyi` documents every signature.
 //!
 //! - The GIL is released while murk works (`Python::detach`), and the work
-//!   runs on a rayon pool owned by [`pool`] (safe after `fork`).
+//!   runs on a rayon pool owned by the `pool` module (safe after `fork`).
 //! - Errors are `murk.MurkError` subclasses with the CLI's messages
-//!   ([`errors`]).
+//!   (the `errors` module).
 //! - `apply` on a scan gives the bytes `murk apply` writes for the same scan
 //!   with the same seed when `key` is the CLI's scan key (the file's path
 //!   relative to the input argument: its name for a file argument).
@@ -452,6 +452,7 @@ fn batch_options(
         pcd_data: pcd_data
             .parse::<PcdData>()
             .map_err(|e| input(format!("pcd_data: {e}")))?,
+        keep_partial: false,
     })
 }
 
@@ -577,9 +578,18 @@ fn apply_file(
                         ),
                     ));
                 }
+                if job.format_in == PointFormat::Pcap {
+                    return Err(input_err(
+                        &input,
+                        "is a capture: it gives one output per revolution; use apply_files",
+                    ));
+                }
                 job.key = key;
-                let report = murk_infer::batch::run_job(&applier, &job, &opts)
+                let reports = murk_infer::batch::run_job(&applier, &job, &opts)
                     .map_err(|e| errors::infer(&e))?;
+                let report = reports
+                    .first()
+                    .ok_or_else(|| input_err(&input, "gave no output"))?;
                 serde_json::to_string(&report.summary)
                     .map_err(|e| errors::MurkError::new_err(e.to_string()))
             })
@@ -636,7 +646,7 @@ fn fit(
                     let s: String = v.extract()?;
                     p.edge(
                         s.parse::<murk_fit::EdgeShape>()
-                            .map_err(|e| input(format!("edge: {}", errors::message(&e))))?,
+                            .map_err(|e| input(format!("edge: {e}")))?,
                     )
                 }
                 "per_band_width" => p.shared_edge_width(!b(&v)?),

@@ -61,6 +61,12 @@ pub enum ExtensionObservable {
     Intensity,
 }
 
+impl std::fmt::Display for ExtensionObservable {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
 impl ExtensionObservable {
     /// The name used in reports (`survival`, `count`, `range`, `intensity`).
     pub fn name(self) -> &'static str {

@@ -101,9 +101,96 @@ impl PointFormat {
     }
 }
 
+/// The record layout of a headerless binary point file (`.bin`,
+/// `.pcd.bin`): little-endian `f32` values, one record per point.
+///
+/// | name | record | fields | typical source |
+/// |---|---|---|---|
+/// | `xyzi` | 16 bytes | x y z intensity | KITTI (intensity 0–1) |
+/// | `xyzir` | 20 bytes | x y z intensity ring | nuScenes, Seeing Through Fog (intensity 0–255) |
+/// | `xyzit` | 20 bytes | x y z intensity time (seconds) | other five-float exports |
+///
+/// `xyzir` and `xyzit` have the same size, and a file of `80·k` bytes fits
+/// all three: the bytes alone cannot tell them apart, so murk's readers take
+/// the layout from the caller (`--bin-layout`, `bin_layout` in
+/// `campaign.toml`) and refuse to guess when the size fits several.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum BinLayout {
+    /// `x y z intensity` (16 bytes).
+    Xyzi,
+    /// `x y z intensity ring` (20 bytes; ring a whole number).
+    Xyzir,
+    /// `x y z intensity time` (20 bytes; time in seconds).
+    Xyzit,
+}
+
+impl BinLayout {
+    /// Every layout, in a stable order.
+    pub const ALL: [BinLayout; 3] = [BinLayout::Xyzi, BinLayout::Xyzir, BinLayout::Xyzit];
+
+    /// Bytes per record.
+    pub fn record_len(self) -> usize {
+        match self {
+            BinLayout::Xyzi => 16,
+            BinLayout::Xyzir | BinLayout::Xyzit => 20,
+        }
+    }
+
+    /// The name used by `--bin-layout` and `campaign.toml`.
+    pub fn name(self) -> &'static str {
+        match self {
+            BinLayout::Xyzi => "xyzi",
+            BinLayout::Xyzir => "xyzir",
+            BinLayout::Xyzit => "xyzit",
+        }
+    }
+
+    /// The intensity scale files of this layout carry unless told otherwise:
+    /// KITTI's 0–1 for `xyzi`, the 8-bit byte convention (calibrated) for
+    /// the five-float layouts (nuScenes, Seeing Through Fog).
+    pub fn default_intensity_scale(self) -> IntensityScale {
+        match self {
+            BinLayout::Xyzi => IntensityScale::KITTI,
+            BinLayout::Xyzir | BinLayout::Xyzit => IntensityScale::Calibrated,
+        }
+    }
+}
+
+impl std::str::FromStr for BinLayout {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "xyzi" | "kitti" => Ok(BinLayout::Xyzi),
+            "xyzir" | "nuscenes" | "stf" => Ok(BinLayout::Xyzir),
+            "xyzit" => Ok(BinLayout::Xyzit),
+            other => Err(format!(
+                "unknown binary layout {other:?}: expected xyzi, xyzir or xyzit"
+            )),
+        }
+    }
+}
+
+impl std::fmt::Display for BinLayout {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn bin_layouts_parse_and_size() {
+        for l in BinLayout::ALL {
+            assert_eq!(l.name().parse::<BinLayout>().unwrap(), l);
+        }
+        assert_eq!(BinLayout::Xyzi.record_len(), 16);
+        assert_eq!(BinLayout::Xyzir.record_len(), 20);
+        let e = "xyz".parse::<BinLayout>().unwrap_err();
+        assert!(e.contains("xyzi, xyzir or xyzit"), "{e}");
+    }
 
     #[test]
     fn nuscenes_before_kitti() {

@@ -15,6 +15,10 @@
 //!   for formats that carry no ring.
 //! - [`PointFormat`]: the point-cloud file formats murk reads and writes.
 //! - [`WeatherClass`]: clear, fog, rain, snow.
+//! - [`EdgeShape`]: the soft survival edge law (probit or unit-variance
+//!   logistic), fitted by `fit`, applied by `infer`.
+//! - [`seed`]: the one seed derivation, `(seed, item key, purpose)`, of
+//!   every randomised step.
 //! - [`CoefficientTable`]: the fitted weather-noise coefficients
 //!   (`weather-noise-coefficients/1`), the contract between fit and apply.
 //!
@@ -38,12 +42,14 @@
 mod atomic;
 mod bins;
 mod cloud;
+mod edge;
 mod error;
 mod extension;
 mod format;
 mod intensity;
 mod lidar;
 pub mod real_data;
+pub mod seed;
 mod table;
 mod walk;
 mod weather;
@@ -54,12 +60,13 @@ pub use atomic::{
 };
 pub use bins::nice_step;
 pub use cloud::PointCloud;
+pub use edge::{EdgeShape, LOGISTIC_UNIT};
 pub use error::TypesError;
 pub use extension::{
     CovariateValue, ExtensionFunction, ExtensionObservable, ModelExtension, POINT_COVARIATES,
     PointCovariates, combine as combine_extensions,
 };
-pub use format::PointFormat;
+pub use format::{BinLayout, PointFormat};
 pub use intensity::IntensityScale;
 pub use lidar::LidarSpec;
 pub use table::{

@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::{IntensityScale, TypesError};
+use crate::{BinLayout, IntensityScale, TypesError};
 
 /// The LiDAR of a campaign (`[lidar]` in `campaign.toml`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -26,6 +26,16 @@ pub struct LidarSpec {
     /// the format's default (calibrated for PCD/CSV/Parquet, KITTI for `.bin`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub intensity_scale: Option<IntensityScale>,
+    /// Record layout of this campaign's `.bin` files (`xyzi`, `xyzir`,
+    /// `xyzit`); absent means murk reads `.bin` as KITTI `xyzi` where the
+    /// file size leaves no doubt and refuses files it cannot tell apart.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bin_layout: Option<BinLayout>,
+    /// Column names of header-less CSV files, in order (for example
+    /// `["x", "y", "z", "intensity", "ring"]` for RADIATE); absent means
+    /// CSV files start with a header line.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub csv_columns: Option<Vec<String>>,
 }
 
 fn one() -> f64 {
@@ -53,6 +63,8 @@ impl LidarSpec {
             azimuth_resolution_deg: 0.2,
             max_range_m: 100.0,
             intensity_scale: None,
+            bin_layout: None,
+            csv_columns: None,
         }
     }
 

@@ -185,11 +185,13 @@ pub struct MorBin {
 /// The maximum-likelihood survival boundary of one weather.
 ///
 /// `P(kept | r, MOR, band) = π + (1 − ε − π) · (1 − F((r − s_b·M)/(w_b·s_b·M)))`
-/// with `M = MOR × range_scale` and `F` the standard [`SurvivalFit::edge`] CDF.
+/// with `M = MOR × range_scale` and `F` the unit-variance [`SurvivalFit::edge`]
+/// CDF; [`crate::EdgeShape`] is the one definition of this law.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SurvivalFit {
-    /// `probit` (normal CDF) or `logistic`.
-    pub edge: String,
+    /// `probit` (normal CDF) or `logistic` (unit-variance logistic CDF); the
+    /// names older tables wrote still parse.
+    pub edge: crate::EdgeShape,
     /// Dropout ε: probability that a return well inside the vanishing
     /// distance is still lost.
     pub dropout: f64,
@@ -572,9 +574,6 @@ impl CoefficientTable {
             }
             if let Some(s) = &c.survival {
                 let f = format!("{at}.survival");
-                v.check(s.edge == "probit" || s.edge == "logistic", &f, || {
-                    format!("edge {:?} is not probit or logistic", s.edge)
-                });
                 v.rate(Some(s.dropout), &format!("{f}.dropout"));
                 v.rate(Some(s.residual), &format!("{f}.residual"));
             }

@@ -62,6 +62,10 @@ pub struct CaptureStats {
     pub frames_dropped: usize,
     /// Points in the dropped frames.
     pub points_dropped: u64,
+    /// Where and how the file ends inside a packet record, when
+    /// [`crate::PcapOptions::keep_truncated_tail`] kept the packets before
+    /// it (`None`: the capture ends on a record boundary).
+    pub truncated_tail: Option<String>,
 }
 
 impl CaptureStats {

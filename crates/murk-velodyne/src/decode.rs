@@ -79,7 +79,15 @@ pub fn decode_pcap_named(
     let mut period = PeriodCheck::default();
 
     for record in Records::new(header, bytes, name) {
-        let record = record?;
+        let record = match record {
+            Ok(r) => r,
+            // The records iterator reports a cut only at the end of the file.
+            Err(e @ VelodyneError::Truncated { .. }) if opts.keep_truncated_tail => {
+                stats.truncated_tail = Some(e.to_string());
+                break;
+            }
+            Err(e) => return Err(e),
+        };
         stats.packets_total += 1;
         let at = At {
             path: name,

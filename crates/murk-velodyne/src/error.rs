@@ -95,7 +95,7 @@ pub enum VelodyneError {
     /// A packet that is neither a Velodyne data nor position packet, with
     /// [`crate::ForeignPolicy::Error`].
     #[error(
-        "{}: packet {packet} at byte {offset}: foreign packet: {what} (use ForeignPolicy::Skip to count and skip such packets)",
+        "{}: packet {packet} at byte {offset}: foreign packet: {what} (decode with ForeignPolicy::Skip, what murk-io does, to count and skip such packets)",
         .path.display()
     )]
     Foreign {

@@ -20,6 +20,7 @@ pub const POSITION_PORT: u16 = 8308;
 /// | `return_mode` | [`ReturnSelect::AsRecorded`] | which returns become points |
 /// | `on_foreign` | [`ForeignPolicy::Error`] | what a non-Velodyne packet does |
 /// | `min_frame_points` | `0` | a *partial* first/last frame with fewer points is dropped |
+/// | `keep_truncated_tail` | `false` | a capture cut inside its last record keeps the frames before the cut ([`crate::CaptureStats::truncated_tail`]) instead of failing |
 /// | `products` | [`ProductPolicy::Vlp16`] | which product-id bytes are decoded |
 ///
 /// Position packets are legitimate VLP-16 traffic and never need a flag;
@@ -55,6 +56,12 @@ pub struct PcapOptions {
     pub min_frame_points: usize,
     /// Which product-id bytes are decoded with the VLP-16 geometry.
     pub products: ProductPolicy,
+    /// When the file ends inside a packet record (a capture cut short, a
+    /// copy interrupted), keep the packets before it and describe the cut
+    /// in [`crate::CaptureStats::truncated_tail`] instead of failing with
+    /// [`crate::VelodyneError::Truncated`]. The frame the cut falls in is
+    /// then the last one, flagged partial when it does not reach 360°.
+    pub keep_truncated_tail: bool,
 }
 
 impl Default for PcapOptions {
@@ -66,6 +73,7 @@ impl Default for PcapOptions {
             on_foreign: ForeignPolicy::Error,
             min_frame_points: 0,
             products: ProductPolicy::Vlp16,
+            keep_truncated_tail: false,
         }
     }
 }

@@ -583,6 +583,38 @@ fn truncated_record_is_an_error_naming_the_packet() {
 }
 
 #[test]
+fn a_cut_last_record_keeps_the_packets_before_it_when_asked() {
+    let sweep = Sweep {
+        packets: 200,
+        start_azimuth_deg: 90.0,
+        ..Sweep::default()
+    };
+    let bytes = sweep.to_pcap();
+    let keep = PcapOptions {
+        keep_truncated_tail: true,
+        ..PcapOptions::default()
+    };
+    let whole = decode_pcap(&bytes, &keep).unwrap();
+    assert!(whole.stats.truncated_tail.is_none());
+    // Cut inside the payload and inside the record header of the last packet.
+    for cut in [700, 1260] {
+        let c = decode_pcap(&bytes[..bytes.len() - cut], &keep).unwrap();
+        assert_eq!(c.stats.packets_data, 199, "cut {cut}");
+        let n = whole.frames.len();
+        assert_eq!(c.frames.len(), n);
+        assert_eq!(c.frames[..n - 1], whole.frames[..n - 1]);
+        assert!(c.stats.last_frame_partial);
+        let why = c.stats.truncated_tail.unwrap();
+        assert!(
+            why.contains("packet 200") && why.contains("truncated"),
+            "{why}"
+        );
+        // Without the option the same bytes are an error.
+        assert!(decode_pcap(&bytes[..bytes.len() - cut], &PcapOptions::default()).is_err());
+    }
+}
+
+#[test]
 fn truncated_record_header_is_an_error() {
     let p = turning(ReturnMode::Strongest, 0, 40);
     let bytes = pcap_of_packets(&[p.clone(), p]);

@@ -4,6 +4,7 @@
 //! weather and are not independent, so a point bootstrap would understate the
 //! uncertainty.
 
+use murk_types::seed::{Purpose, derive};
 use rand::{RngExt, SeedableRng, rngs::ChaCha8Rng};
 
 use crate::stats::quantile::quantile;
@@ -21,28 +22,21 @@ pub struct RateUncertainty {
     pub replicates: u32,
 }
 
-/// SplitMix64 finaliser, to derive independent seeds from `(seed, stream)`.
-pub fn mix(seed: u64, stream: u64) -> u64 {
-    let mut z = seed ^ stream.wrapping_mul(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
-}
-
 /// Bootstrap of the pooled rate of `rows` (`(kept, total)` per recording),
-/// seeded by `(seed, stream)`. `None` with fewer than two recordings, no
-/// replicate, or no trial at all.
+/// seeded by murk's one derivation of `(seed, key, Purpose::Bootstrap)`
+/// (`key` names the rate, e.g. `"radar/fog"`). `None` with fewer than two
+/// recordings, no replicate, or no trial at all.
 pub fn bootstrap_rate(
     rows: &[(u64, u64)],
     replicates: u32,
     seed: u64,
-    stream: u64,
+    key: &str,
 ) -> Option<RateUncertainty> {
     let n = rows.len();
     if n < 2 || replicates == 0 || rows.iter().all(|r| r.1 == 0) {
         return None;
     }
-    let mut rng = ChaCha8Rng::seed_from_u64(mix(seed, stream));
+    let mut rng = ChaCha8Rng::from_seed(derive(seed, key, Purpose::Bootstrap).bytes());
     let mut reps = Vec::with_capacity(replicates as usize);
     for _ in 0..replicates {
         let (mut k, mut t) = (0u64, 0u64);
@@ -80,23 +74,23 @@ mod tests {
         let rows: Vec<(u64, u64)> = (0..50)
             .map(|i| (if i % 2 == 0 { 30 } else { 50 }, 100))
             .collect();
-        let u = bootstrap_rate(&rows, 2000, 1, 0).unwrap();
+        let u = bootstrap_rate(&rows, 2000, 1, "a").unwrap();
         assert!((u.std / 0.01414 - 1.0).abs() < 0.15, "{u:?}");
         assert!(u.ci95_low < 0.4 && u.ci95_high > 0.4);
     }
 
     #[test]
-    fn same_seed_same_answer_other_stream_other_answer() {
+    fn same_seed_same_answer_other_key_other_answer() {
         let rows: Vec<(u64, u64)> = (0..20).map(|i| (i, 30)).collect();
-        let a = bootstrap_rate(&rows, 200, 9, 1).unwrap();
-        let b = bootstrap_rate(&rows, 200, 9, 1).unwrap();
-        let c = bootstrap_rate(&rows, 200, 9, 2).unwrap();
+        let a = bootstrap_rate(&rows, 200, 9, "a").unwrap();
+        let b = bootstrap_rate(&rows, 200, 9, "a").unwrap();
+        let c = bootstrap_rate(&rows, 200, 9, "b").unwrap();
         assert_eq!(a, b);
         assert_ne!(a, c);
     }
 
     #[test]
     fn one_recording_has_no_uncertainty() {
-        assert!(bootstrap_rate(&[(3, 4)], 100, 0, 0).is_none());
+        assert!(bootstrap_rate(&[(3, 4)], 100, 0, "a").is_none());
     }
 }

@@ -1,4 +1,5 @@
-//! Standard CDFs and their tails, on `libm` so that results do not depend on
+//! Standard CDFs and their tails (the survival edge's law lives in
+//! `murk_types::EdgeShape`), on `libm` so that results do not depend on
 //! the platform's C library.
 
 use std::f64::consts::{PI, SQRT_2};
@@ -19,21 +20,6 @@ pub fn normal_sf(z: f64) -> f64 {
 #[inline]
 pub fn normal_ln_pdf(z: f64) -> f64 {
     -0.5 * z * z - 0.5 * (2.0 * PI).ln()
-}
-
-/// Scale that gives the logistic distribution unit variance.
-pub const LOGISTIC_UNIT: f64 = PI / 1.732_050_807_568_877_2; // π/√3
-
-/// Survival 1 − F(z) of the unit-variance logistic distribution.
-#[inline]
-pub fn logistic_sf(z: f64) -> f64 {
-    let t = z * LOGISTIC_UNIT;
-    if t >= 0.0 {
-        let e = libm::exp(-t);
-        e / (1.0 + e)
-    } else {
-        1.0 / (1.0 + libm::exp(t))
-    }
 }
 
 /// The logistic function 1 / (1 + e^(−x)).
@@ -68,12 +54,8 @@ mod tests {
     }
 
     #[test]
-    fn logistic_has_unit_variance_scale() {
-        assert!((logistic_sf(0.0) - 0.5).abs() < 1e-15);
-        // Symmetry and the unit-variance scale: sf(1) = 1/(1+e^{π/√3}).
-        let want = 1.0 / (1.0 + (PI / 3f64.sqrt()).exp());
-        assert!((logistic_sf(1.0) - want).abs() < 1e-15);
-        assert!((logistic_sf(-1.0) - (1.0 - want)).abs() < 1e-15);
+    fn logit_inverts_sigmoid() {
         assert!((sigmoid(logit(0.3)) - 0.3).abs() < 1e-15);
+        assert!((sigmoid(0.0) - 0.5).abs() < 1e-15);
     }
 }

@@ -7,13 +7,20 @@
 //!            [--attenuate-intensity] [--soft-edge] [--slope survival|quantile]
 //!            [--seed N] [--range-scale K] [--intensity-scale NAME]
 //!            [--campaign DIR] [--clear-mor-threshold M] [--summary FILE]
+//!            [--columns x,y,z,intensity,ring] [--bin-layout xyzi|xyzir|xyzit]
+//!            [--keep-partial]
 //! ```
 //!
 //! Glue only: flags → [`murk_infer::ApplyParams`] → [`murk_infer::batch`].
 //! INPUTS are files or folders (walked recursively; files that are not point
 //! clouds are listed, not read); outputs keep their names below `--out`, in
 //! the input's format or `--format`. Nothing is written when an output would
-//! overwrite an input.
+//! overwrite an input. A `.pcap` is applied per revolution into
+//! `OUT/<stem>/frame-NNNNNN.<ext>` (give `--format`); its partial first and
+//! last revolutions are left out unless `--keep-partial`. The summary says
+//! in which intensity scale the inputs were read and whether that scale was
+//! declared (`--intensity-scale`, `--campaign`), recorded in the file or
+//! assumed from the format.
 
 use std::path::PathBuf;
 
@@ -21,7 +28,7 @@ use anyhow::{Context, bail};
 use murk_infer::batch;
 use murk_infer::{ApplyParams, ApplySummary, BatchOptions, Severity, SlopeSource};
 use murk_io::{PcdData, ReadOptions};
-use murk_types::{IntensityScale, PointFormat, WeatherClass};
+use murk_types::{BinLayout, IntensityScale, PointFormat, WeatherClass};
 
 /// Arguments of `murk apply`.
 #[derive(clap::Args, Debug)]
@@ -92,15 +99,26 @@ pub struct Args {
     #[arg(long)]
     pub range_scale: Option<f64>,
     /// Scale the inputs' intensity is in (calibrated, kitti, six-bit, …);
-    /// default: each format's own.
+    /// default: what each file records, else its format's own.
     #[arg(long)]
     pub intensity_scale: Option<IntensityScale>,
+    /// Column names of header-less CSV inputs, in order (e.g.
+    /// x,y,z,intensity,ring).
+    #[arg(long, value_delimiter = ',', value_name = "NAMES")]
+    pub columns: Option<Vec<String>>,
+    /// Record layout of `.bin` inputs: xyzi (KITTI), xyzir (Seeing Through
+    /// Fog), xyzit; default: KITTI where the file size leaves no doubt.
+    #[arg(long, value_name = "LAYOUT")]
+    pub bin_layout: Option<BinLayout>,
+    /// Also apply to the partial first and last revolutions of captures.
+    #[arg(long)]
+    pub keep_partial: bool,
     /// A campaign folder whose `[lidar]` describes the input sensor (ring
     /// elevations for ring derivation and near-range rays, azimuth grid).
     #[arg(long)]
     pub campaign: Option<PathBuf>,
-    /// MOR (m) at and above which applying is the identity; default: the
-    /// table's, else 2000.
+    /// MOR (m) at and above which applying is the identity (default 2000,
+    /// the PDD rules' clear threshold; the table does not record one).
     #[arg(long)]
     pub clear_mor_threshold: Option<f64>,
     /// Also write the JSON report (murk-apply-summary/1) here.
@@ -180,9 +198,12 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             format: None,
             lidar,
             intensity_scale: a.intensity_scale,
+            bin_layout: a.bin_layout,
+            csv_columns: a.columns.clone(),
         },
         format: a.format,
         pcd_data: a.pcd_data,
+        keep_partial: a.keep_partial,
     };
     let plan = batch::plan(&a.inputs, &a.out, &opts)?;
     for s in &plan.skipped {
@@ -234,19 +255,43 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     if let Some(path) = &a.summary {
         report.write(path)?;
     }
-    for w in report.totals.warnings.iter().skip(applier.warnings().len()) {
+    // The model's warnings were printed above (and are `model.warnings` in
+    // the report); the totals carry the scans' own.
+    for w in &report.totals.warnings {
         errln!("murk: warning: {w}");
     }
-    print_summary(&report.totals, &report.model, report.files.len(), &a.out);
+    print_summary(&report.totals, &report.model, &report.files, &a.out);
     Ok(())
+}
+
+/// `calibrated (declared) for 3 files, kitti (assumed (format default)) for
+/// 1 file`: the scales the inputs were read in.
+fn scales_line(files: &[murk_infer::FileReport]) -> String {
+    let mut counts: std::collections::BTreeMap<(String, &str), usize> = Default::default();
+    for f in files {
+        *counts
+            .entry((f.intensity_scale.clone(), f.intensity_scale_source))
+            .or_default() += 1;
+    }
+    counts
+        .iter()
+        .map(|((scale, source), n)| {
+            format!(
+                "{scale} ({source}) for {n} file{}",
+                if *n == 1 { "" } else { "s" }
+            )
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 fn print_summary(
     t: &ApplySummary,
     m: &murk_infer::ModelSummary,
-    files: usize,
+    reports: &[murk_infer::FileReport],
     out: &std::path::Path,
 ) {
+    let files = reports.len();
     let mor = m
         .mor_m
         .map_or("∞ (no rain)".into(), |v| format!("{v:.2} m"));
@@ -281,6 +326,19 @@ fn print_summary(
         t.vanished,
         100.0 * t.kept_fraction()
     );
+    if !reports.is_empty() {
+        outln!("  intensity read as {}", scales_line(reports));
+    }
+    if t.below_bands > 0
+        && let Some(first) = m.bands.first()
+    {
+        outln!(
+            "  reflectivity below {} (under the table's first band): {} in, {} vanished (at the first band's distance)",
+            first.reflectivity_min,
+            t.below_bands,
+            t.below_bands_vanished
+        );
+    }
     for (b, r) in t.bands.iter().zip(&m.bands) {
         let hi = b
             .reflectivity_max

@@ -4,6 +4,8 @@
 //! murk convert INPUT... --out DIR --format pcd|bin|nuscenes|csv|parquet
 //!              [--pcd-data ascii|binary|binary_compressed]
 //!              [--intensity-scale NAME] [--input-intensity-scale NAME]
+//!              [--columns x,y,z,intensity,ring] [--bin-layout xyzi|xyzir|xyzit]
+//!              [--keep-partial]
 //! ```
 //!
 //! - An INPUT is a file or a folder; folders are walked recursively
@@ -18,11 +20,32 @@
 //!   not collide.
 //! - A `.pcap` always becomes a folder of frames, one per revolution:
 //!   `DIR/<stem>/frame-000001.<ext>`, `frame-000002.<ext>`, … (numbered from
-//!   1), whether one capture or many are converted.
-//! - Intensity is written as read unless `--intensity-scale` names the scale
-//!   to write it in (e.g. `calibrated` to turn KITTI's 0–1 into 0–255);
-//!   `--input-intensity-scale` overrides the scale the inputs are taken to
-//!   be in (default: the format's, see `murk_types::IntensityScale`).
+//!   1 over every revolution of the capture), whether one capture or many
+//!   are converted. The partial first and last revolutions (not a full
+//!   360°) are left out, and said so, unless `--keep-partial`: each output
+//!   file claims to be one revolution, and a revolution with a missing
+//!   wedge would be read as a full one (per-scan counts, near-range
+//!   returns). Their numbers are kept either way, so a frame's name does not
+//!   depend on the flag. Packets that are not the sensor's (ARP, GPS) are
+//!   skipped and counted; a capture cut mid-packet keeps the revolutions
+//!   before the cut (warned).
+//! - **Intensity keeps its meaning.** A PCD output records the scale it is
+//!   written in (`# murk: intensity_scale kitti` in its header), so values
+//!   are written as read. The other formats cannot record a scale: their
+//!   values are converted to the format's own default (CSV, Parquet,
+//!   nuScenes: calibrated 0–255; KITTI `.bin`: 0–1), so that reading the
+//!   output back without flags gives the same reflectivities, and the line
+//!   of the file says so (`intensity kitti → calibrated`).
+//!   `--intensity-scale` names the scale to write instead (a warning says
+//!   when the output cannot record it); `--input-intensity-scale` overrides
+//!   the scale the inputs are taken to be in (default: what the file
+//!   records, else the format's, see `murk_types::IntensityScale`).
+//! - `--columns` names the columns of header-less CSV inputs (RADIATE:
+//!   `x,y,z,intensity,ring`); `--bin-layout` the record layout of `.bin`
+//!   inputs (Seeing Through Fog: `xyzir`). A `.bin` whose size fits several
+//!   layouts is refused unless told (see `murk_io::parse_kitti`).
+//! - Fields a cloud cannot carry (a PCD's `rgb` or `label`, a CSV's extra
+//!   columns) are not written; a warning names them.
 //! - Nothing is written when two inputs would land on the same output or an
 //!   output would overwrite an input. Every file is written atomically.
 
@@ -30,8 +53,8 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
-use murk_io::{PcdData, ReadOptions, WriteOptions, read_frames, write_cloud_with};
-use murk_types::{IntensityScale, PointFormat};
+use murk_io::{PcdData, ReadOptions, WriteOptions, read_frames_noted, write_cloud_with};
+use murk_types::{BinLayout, IntensityScale, PointFormat};
 
 /// Arguments of `murk convert`.
 #[derive(clap::Args, Debug)]
@@ -52,9 +75,21 @@ pub struct Args {
     /// the values as read, unconverted.
     #[arg(long)]
     pub intensity_scale: Option<IntensityScale>,
-    /// Scale the inputs' intensity is in; default: each format's own.
+    /// Scale the inputs' intensity is in; default: what each file records,
+    /// else its format's own.
     #[arg(long)]
     pub input_intensity_scale: Option<IntensityScale>,
+    /// Column names of header-less CSV inputs, in order (e.g.
+    /// x,y,z,intensity,ring).
+    #[arg(long, value_delimiter = ',', value_name = "NAMES")]
+    pub columns: Option<Vec<String>>,
+    /// Record layout of `.bin` inputs: xyzi (KITTI), xyzir (Seeing Through
+    /// Fog), xyzit; default: KITTI where the file size leaves no doubt.
+    #[arg(long, value_name = "LAYOUT")]
+    pub bin_layout: Option<BinLayout>,
+    /// Also write the partial first and last revolutions of captures.
+    #[arg(long)]
+    pub keep_partial: bool,
 }
 
 fn parse_writable_format(s: &str) -> Result<PointFormat, String> {
@@ -197,6 +232,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
     let read_opts = ReadOptions {
         intensity_scale: args.input_intensity_scale,
+        bin_layout: args.bin_layout,
+        csv_columns: args.columns.clone(),
         ..ReadOptions::default()
     };
     let write_opts = WriteOptions {
@@ -217,17 +254,45 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     let bar = super::progress_bar(jobs.len(), "inputs", false);
     let (mut done, mut files, mut points) = (0usize, 0usize, 0usize);
+    // The intensity conversions made, for the summary line.
+    let mut conversions: BTreeMap<(String, String), usize> = BTreeMap::new();
     for j in &jobs {
         bar.set_message(j.input.display().to_string());
-        let frames = read_frames(&j.input, &read_opts)?;
+        let frames = read_frames_noted(&j.input, &read_opts)?;
+        for w in &frames.notes.warnings {
+            bar.suspend(|| errln!("murk: warning: {w}"));
+        }
+        if !frames.notes.dropped_fields.is_empty() {
+            bar.suspend(|| {
+                errln!(
+                    "murk: warning: {}: fields {} are not written (murk's clouds hold x, y, z, intensity, ring and time)",
+                    j.input.display(),
+                    frames.notes.dropped_fields.join(", ")
+                )
+            });
+        }
+        let mut partial_left = Vec::new();
+        let mut partial_kept = 0usize;
+        let mut clouds = Vec::with_capacity(frames.clouds.len());
         let outputs: Vec<PathBuf> = if j.is_pcap {
             let dir = args.out.join(&j.stem);
             std::fs::create_dir_all(&dir)
                 .with_context(|| format!("{}: cannot create folder", dir.display()))?;
-            (1..=frames.len())
-                .map(|k| dir.join(format!("frame-{k:06}.{ext}")))
-                .collect()
+            let mut outputs = Vec::new();
+            for (k, (cloud, &partial)) in frames.clouds.into_iter().zip(&frames.partial).enumerate()
+            {
+                let name = format!("frame-{:06}.{ext}", k + 1);
+                if partial && !args.keep_partial {
+                    partial_left.push(format!("{name} ({} points)", cloud.len()));
+                    continue;
+                }
+                partial_kept += usize::from(partial);
+                outputs.push(dir.join(name));
+                clouds.push(cloud);
+            }
+            outputs
         } else {
+            clouds = frames.clouds;
             let out = args.out.join(with_ext(&j.stem, ext));
             if let Some(dir) = out.parent() {
                 std::fs::create_dir_all(dir)
@@ -235,7 +300,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             }
             vec![out]
         };
-        for (mut cloud, out) in frames.into_iter().zip(&outputs) {
+        let mut warned_scale = false;
+        for (mut cloud, out) in clouds.into_iter().zip(&outputs) {
             if stop.load(std::sync::atomic::Ordering::Relaxed) {
                 bar.finish_and_clear();
                 return Err(super::Interrupted(format!(
@@ -249,13 +315,70 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 .into());
             }
             refuse_input(out)?;
-            if let Some(scale) = args.intensity_scale {
-                cloud.to_scale(scale);
+            let from = cloud.intensity_scale;
+            let to = args
+                .intensity_scale
+                .unwrap_or_else(|| murk_io::portable_scale(args.format, from));
+            cloud.to_scale(to);
+            if !murk_io::records_intensity_scale(args.format)
+                && to != args.format.default_intensity_scale()
+                && !warned_scale
+            {
+                warned_scale = true;
+                bar.suspend(|| {
+                    errln!(
+                        "murk: warning: {}: intensity written as {to}, which .{ext} files cannot record: read it back with --intensity-scale {to}",
+                        out.display()
+                    )
+                });
             }
+            *conversions
+                .entry((from.to_string(), to.to_string()))
+                .or_insert(0) += 1;
             // Atomic: a Ctrl-C during the write waits for it to end.
             write_cloud_with(out, &cloud, &write_opts)?;
             points += cloud.len();
             files += 1;
+        }
+        // What a capture lost or kept is said per capture (a batch of
+        // ordinary files says nothing per file: one line per file would be
+        // thousands).
+        let mut notes = Vec::new();
+        if !partial_left.is_empty() {
+            notes.push(format!(
+                "left out {} partial revolution{}: {}; --keep-partial writes them",
+                partial_left.len(),
+                plural(partial_left.len()),
+                partial_left.join(", ")
+            ));
+        }
+        if partial_kept > 0 {
+            notes.push(format!(
+                "{partial_kept} of the {} frames written are partial revolutions",
+                outputs.len()
+            ));
+        }
+        if frames.notes.foreign_packets > 0 {
+            notes.push(format!(
+                "{} foreign packet{} skipped",
+                frames.notes.foreign_packets,
+                if frames.notes.foreign_packets == 1 {
+                    ""
+                } else {
+                    "s"
+                }
+            ));
+        }
+        if !notes.is_empty() {
+            bar.suspend(|| {
+                outln!(
+                    "{} -> {} ({} frames): {}",
+                    j.input.display(),
+                    args.out.join(&j.stem).display(),
+                    outputs.len(),
+                    notes.join("; ")
+                )
+            });
         }
         done += 1;
         bar.inc(1);
@@ -263,6 +386,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     bar.finish_and_clear();
     // One line for the whole batch (one per file would be thousands).
     let pcaps = jobs.iter().filter(|j| j.is_pcap).count();
+    let intensity = conversions
+        .iter()
+        .map(|((from, to), n)| {
+            let what = if from == to {
+                format!("intensity {from}")
+            } else {
+                format!("intensity {from} → {to}")
+            };
+            if conversions.len() > 1 {
+                format!("{what} in {n} file{}", plural(*n))
+            } else {
+                what
+            }
+        })
+        .collect::<Vec<_>>()
+        .join(", ");
     outln!(
         "converted {} input{}{} into {files} {ext} file{} ({points} point{}{}) in {}",
         jobs.len(),
@@ -277,9 +416,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         },
         plural(files),
         plural(points),
-        match args.intensity_scale {
-            Some(s) => format!(", intensity as {s}"),
-            None => String::new(),
+        if intensity.is_empty() {
+            String::new()
+        } else {
+            format!("; {intensity}")
         },
         args.out.display()
     );

@@ -12,7 +12,7 @@ use murk_figures::{
     FigureOptions, GaussianPanel, QuantileMarker, RangeMorFigure, SlopeLine, SweepSeries,
     gaussian_histograms, mor_histogram, range_vs_mor, slope_vs_reflectivity,
 };
-use murk_fit::{EdgeShape, FitParams, FittedTable, NoiseHistograms};
+use murk_fit::{FitParams, FittedTable, NoiseHistograms};
 use murk_types::NoiseLaw;
 
 /// Arguments of `murk fit`.
@@ -99,7 +99,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .pairing_tolerance_rel(args.pairing_tolerance_rel)
         .min_points_per_bin(args.min_points_per_bin)
         .censor_fraction(args.censor_fraction)
-        .edge(args.edge.parse::<EdgeShape>()?)
+        .edge(murk_fit::parse_edge(&args.edge)?)
         .shared_edge_width(!args.per_band_width)
         .free_dropout(!args.fixed_dropout)
         .bootstrap_replicates(args.bootstrap)

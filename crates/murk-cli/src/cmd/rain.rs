@@ -7,8 +7,9 @@
 //! render per image with its depth (a 16-bit depth PNG, or a LiDAR scan
 //! projected through a KITTI calibration) → an atomic write under `--out`
 //! with the input's file name. Each image gets its own seed, derived from
-//! `--seed` and its position, so a batch is reproducible and independent of
-//! the thread count.
+//! `--seed` and the image's file name (its output name) by murk's one
+//! derivation ([`murk_types::seed::derive`]), so an image gets the same
+//! drops wherever it stands in the list and a batch is reproducible.
 //!
 //! ```text
 //! murk rain --rate 50 kitti-000008.png --lidar kitti-000008.bin \
@@ -22,6 +23,7 @@ use std::path::PathBuf;
 use anyhow::{Context as _, bail};
 use murk_infer::camera::{Densify, DepthMap, KittiCalib, RainParams, read_rgb, write_rgb_atomic};
 use murk_io::{ReadOptions, read_cloud};
+use murk_types::seed::{Purpose, derive};
 
 /// Arguments of `murk rain`.
 #[derive(clap::Args, Debug)]
@@ -55,7 +57,8 @@ pub struct Args {
     /// Ego speed along the optical axis, m/s.
     #[arg(long, default_value_t = 0.0)]
     pub ego_speed: f64,
-    /// Seed of the drops (image i uses a seed derived from this and i).
+    /// Seed of the drops (each image uses a seed derived from this and its
+    /// file name).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// GAN+PBR: translate each image with this ONNX generator first (see
@@ -67,14 +70,6 @@ pub struct Args {
     /// Hide the progress bar.
     #[arg(long)]
     pub quiet: bool,
-}
-
-/// SplitMix64 of (seed, index): one independent seed per image.
-fn image_seed(seed: u64, index: u64) -> u64 {
-    let mut z = seed ^ index.wrapping_add(1).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
 }
 
 /// Runs `murk rain`.
@@ -103,6 +98,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             args.calib.len(),
             n
         );
+    }
+    let mut names = std::collections::BTreeMap::new();
+    for img in &args.images {
+        if let Some(name) = img.file_name()
+            && let Some(first) = names.insert(name, img)
+        {
+            bail!(
+                "{} and {} have the same file name: outputs are named after their input (and seeded by that name), so one would overwrite the other",
+                first.display(),
+                img.display()
+            );
+        }
     }
     if let Ok(out) = args.out.canonicalize() {
         for img in &args.images {
@@ -158,14 +165,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 &scan.display().to_string(),
             )?
         };
-        let mut params = base.clone().seed(image_seed(args.seed, i as u64));
+        let name = path
+            .file_name()
+            .with_context(|| format!("{}: not a file", path.display()))?;
+        let key = name.to_string_lossy();
+        let seed = derive(args.seed, &key, Purpose::RainImage).to_u64();
+        let mut params = base.clone().seed(seed);
         if let Some(c) = calib {
             params = params.intrinsics(c.intrinsics());
         }
         let (rainy, stats) = params.check()?.render_with_stats(&image, &depth)?;
-        let name = path
-            .file_name()
-            .with_context(|| format!("{}: not a file", path.display()))?;
         write_rgb_atomic(&args.out.join(name), &rainy)?;
         streaks += stats.streaks as u64;
         covered += stats.covered_share;

@@ -1,10 +1,34 @@
-//! Shared by the fuzz targets: options from the first input byte, and the
-//! invariants every successfully parsed cloud must satisfy.
+//! Shared by the fuzz targets: options from the first input byte, the
+//! invariants every successfully parsed cloud must satisfy, and each target's
+//! body ([`run`]).
+//!
+//! The body lives here, not in the `fuzz_target!` files, so that murk-io's
+//! stable test `tests/fuzz_corpus.rs` (which includes this file by path)
+//! replays the committed seeds through exactly what the fuzzer runs.
 
 use std::path::Path;
 
 use murk_io::{PcdData, ReadOptions, WriteOptions, encode_cloud, parse_cloud};
 use murk_types::{IntensityScale, LidarSpec, PointCloud, PointFormat};
+
+/// One fuzz input of the target of `format`: the first byte picks the
+/// options, the rest goes to that format's byte parser (`parse_pcd`,
+/// `parse_kitti`, `parse_nuscenes`, `parse_csv`), which must return `Ok` or
+/// `Err` and never panic; an `Ok` cloud must pass [`check`].
+pub fn run(format: PointFormat, data: &[u8]) {
+    let (opts, bytes) = options(data);
+    let name = Path::new("fuzz");
+    let parsed = match format {
+        PointFormat::Pcd => murk_io::parse_pcd(bytes, name, &opts),
+        PointFormat::KittiBin => murk_io::parse_kitti(bytes, name, &opts),
+        PointFormat::NuscenesBin => murk_io::parse_nuscenes(bytes, name, &opts),
+        PointFormat::Csv => murk_io::parse_csv(bytes, name, &opts),
+        other => panic!("no fuzz target parses {other:?}"),
+    };
+    if let Ok(cloud) = parsed {
+        check(&cloud, format);
+    }
+}
 
 /// Splits off the first byte and turns it into read options: bit 0–1 pick
 /// the sensor used to derive rings (none = VLP-16, a 2-ring sensor, a
