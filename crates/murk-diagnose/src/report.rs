@@ -169,6 +169,8 @@ pub struct Diagnosis {
 pub struct FigureData {
     /// Recording id.
     pub recording: String,
+    /// The recording's MOR, metres (what the simulation was run at).
+    pub mor_m: f64,
     /// The clear recording simulated from.
     pub clear: Vec<[f32; 3]>,
     /// The baseline simulation.
@@ -196,6 +198,7 @@ impl FigureData {
             })?;
         Ok(FigureData {
             recording: rec.id.clone(),
+            mor_m: rec.mor,
             clear: xyz(clear),
             simulated: xyz(&out),
             measured: xyz(&read_calibrated(&rec.lidar, &loaded.spec)?),

@@ -73,7 +73,7 @@ pub fn shared_bins(series: &[(&str, &[f64])], target: usize) -> Bins {
 
 /// Colour of a series: the weather classes get fixed colours (Okabe–Ito,
 /// readable by colour-blind readers); other labels cycle through the rest.
-fn colour(label: &str, i: usize) -> RGBColor {
+pub(crate) fn colour(label: &str, i: usize) -> RGBColor {
     const OTHERS: [RGBColor; 4] = [
         RGBColor(0, 158, 115),
         RGBColor(213, 94, 0),

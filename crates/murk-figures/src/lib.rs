@@ -34,15 +34,18 @@ mod diagnosis;
 mod error;
 mod fit;
 mod histogram;
+mod legend;
 mod output;
+pub mod table;
 
-pub use diagnosis::{ProfileFigure, bev_panels, residual_profile};
+pub use diagnosis::{BevFigure, ProfileFigure, ProfilePoint, bev_panels, residual_profile};
 pub use error::FigureError;
 pub use fit::{
-    GaussianPanel, QuantileMarker, RangeMorFigure, SlopeLine, SweepSeries, gaussian_histograms,
-    range_vs_mor, slope_vs_reflectivity,
+    GaussianPanel, PanelLaw, QuantileMarker, RangeMorFigure, SlopeLine, SweepFigure, SweepSeries,
+    Truncation, gaussian_histograms, range_vs_mor, slope_vs_reflectivity,
 };
 pub use histogram::{Bins, mor_histogram, shared_bins, write_mor_histograms};
+pub use legend::short;
 pub use output::ImageFormat;
 
 /// Size and look of a figure.

@@ -6,7 +6,7 @@ use std::path::Path;
 
 use anyhow::Context as _;
 use murk_diagnose::Diagnosis;
-use murk_figures::{ProfileFigure, bev_panels, residual_profile};
+use murk_figures::{BevFigure, ProfileFigure, ProfilePoint, bev_panels, residual_profile};
 
 fn slug(s: &str) -> String {
     s.chars()
@@ -27,11 +27,18 @@ fn slug(s: &str) -> String {
 /// Writes the figures of `d` into `dir` (PNG and SVG).
 pub fn write(d: &Diagnosis, dir: &Path) -> anyhow::Result<()> {
     for f in d.report.findings.iter().filter(|f| f.significant).take(4) {
-        let points: Vec<(f64, f64)> = f
+        // Categories keep their names on the axis; numeric bins sit at
+        // their mean. The report holds no per-bin interval yet, so none is
+        // drawn (the figure says so rather than inventing one).
+        let points: Vec<ProfilePoint> = f
             .profile
             .iter()
-            .enumerate()
-            .map(|(i, b)| (b.center.unwrap_or(i as f64), b.mean_residual))
+            .map(|b| ProfilePoint {
+                label: b.label.clone(),
+                x: b.center,
+                mean: b.mean_residual,
+                interval: None,
+            })
             .collect();
         let title = format!(
             "{} residual vs {} (strength {:.1})",
@@ -44,6 +51,7 @@ pub fn write(d: &Diagnosis, dir: &Path) -> anyhow::Result<()> {
             y_label: &y,
             points: &points,
             threshold: f.relevance_threshold,
+            interval_label: "no interval in the report",
         };
         for ext in ["png", "svg"] {
             let p = dir.join(format!(
@@ -62,7 +70,15 @@ pub fn write(d: &Diagnosis, dir: &Path) -> anyhow::Result<()> {
     ];
     for ext in ["png", "svg"] {
         let p = dir.join(format!("bev-{}.{ext}", slug(&fd.recording)));
-        bev_panels(&panels, 40.0, &p).with_context(|| format!("drawing {}", p.display()))?;
+        let fig = BevFigure {
+            title: format!(
+                "{} ({}, MOR {:.0} m): clear, simulated at that MOR, measured",
+                fd.recording, d.report.weather, fd.mor_m
+            ),
+            panels: &panels,
+            half_extent_m: 40.0,
+        };
+        bev_panels(&fig, &p).with_context(|| format!("drawing {}", p.display()))?;
     }
     Ok(())
 }

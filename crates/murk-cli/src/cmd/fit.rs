@@ -8,9 +8,10 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context as _;
 use murk_campaign::Campaign;
+use murk_figures::table::{SweepData, noise_laws, range_mor_lines, sweep_series};
 use murk_figures::{
-    FigureOptions, GaussianPanel, QuantileMarker, RangeMorFigure, SlopeLine, SweepSeries,
-    gaussian_histograms, mor_histogram, range_vs_mor, slope_vs_reflectivity,
+    FigureOptions, GaussianPanel, RangeMorFigure, SweepFigure, gaussian_histograms, mor_histogram,
+    range_vs_mor, slope_vs_reflectivity,
 };
 use murk_fit::{FitParams, FittedTable, NoiseHistograms};
 use murk_types::NoiseLaw;
@@ -127,13 +128,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn band_label(min: f64, max: Option<f64>) -> String {
-    match max {
-        Some(m) => format!("[{min}, {m})"),
-        None => format!("[{min}, ∞)"),
-    }
-}
-
 /// Draws every figure of a fit into `dir` (PNG and SVG); returns how many
 /// files were written.
 fn figures(fitted: &FittedTable, dir: &Path) -> anyhow::Result<usize> {
@@ -155,43 +149,14 @@ fn figures(fitted: &FittedTable, dir: &Path) -> anyhow::Result<usize> {
         }
     }
 
-    let mut sweep = Vec::new();
+    let mut sweep_weathers = Vec::new();
     for (w, c) in &t.weathers {
         let Some(d) = diag.weathers.get(w) else {
             continue;
         };
-        // Figure 26: range vs MOR with quantiles and lines.
-        let quantiles: Vec<QuantileMarker> = c
-            .mor_bins
-            .iter()
-            .filter_map(|b| {
-                Some(QuantileMarker {
-                    mor: b.mor_m,
-                    range: b.q99_range_m?,
-                    used: b.used,
-                })
-            })
-            .collect();
-        let mut lines = Vec::new();
-        for b in &c.vanishing_slope {
-            if let Some(s) = b.slope {
-                lines.push(SlopeLine {
-                    label: format!(
-                        "ML {} = {s:.4}",
-                        band_label(b.reflectivity_min, b.reflectivity_max)
-                    ),
-                    slope: s * rs,
-                    seed: false,
-                });
-            }
-        }
-        if let Some(s) = d.q99_all_slope {
-            lines.push(SlopeLine {
-                label: format!("seed q{} (all) = {s:.4}", (c.quantile * 100.0).round()),
-                slope: s * rs,
-                seed: true,
-            });
-        }
+        // Figure 26: range vs MOR with the table's quantiles and lines, one
+        // colour per reflectivity band, nulls said with their reasons.
+        let l = range_mor_lines(c, rs);
         let fig = RangeMorFigure {
             weather: w.name(),
             mor: &d.density.mor,
@@ -199,46 +164,24 @@ fn figures(fitted: &FittedTable, dir: &Path) -> anyhow::Result<usize> {
             range_step: d.density.range_step_m,
             kept: &d.density.kept,
             lost: &d.density.lost,
-            quantiles: &quantiles,
-            lines: &lines,
+            quantiles: &l.quantiles,
+            lines: &l.lines,
+            notes: &l.notes,
         };
         for ext in ["png", "svg"] {
             range_vs_mor(&fig, &opts, &dir.join(format!("range-vs-mor-{w}.{ext}")))?;
             n += 1;
         }
-
-        // Figure 27 series.
-        let centre = |b: &murk_types::SweepBand| {
-            b.reflectivity_max.map_or(b.reflectivity_min * 1.25, |m| {
-                0.5 * (b.reflectivity_min + m)
-            })
-        };
-        let ml: Vec<(f64, f64)> = c
-            .reflectivity_sweep
-            .iter()
-            .filter_map(|b| Some((centre(b), b.slope?)))
-            .collect();
-        let q: Vec<(f64, f64)> = c
-            .reflectivity_sweep
-            .iter()
-            .filter_map(|b| Some((centre(b), b.slope_q99?)))
-            .collect();
-        sweep.push(SweepSeries {
-            label: format!("{w} ML"),
-            points: ml,
-            seed: false,
-        });
-        sweep.push(SweepSeries {
-            label: format!("{w} q{}", (c.quantile * 100.0).round()),
-            points: q,
-            seed: true,
-        });
+        sweep_weathers.push((w.name(), c));
 
         // Figure 29: ghost and ring histograms with their laws.
         let mut panels = Vec::new();
-        for (name, law, hist) in [("ghost", &c.ghost, &d.ghost), ("ring", &c.ring, &d.ring)] {
+        for (name, law, reason, hist) in [
+            ("ghost", &c.ghost, &c.ghost_reason, &d.ghost),
+            ("ring", &c.ring, &c.ring_reason, &d.ring),
+        ] {
             if let Some(h) = hist {
-                panels.extend(noise_panels(name, law.as_ref(), h));
+                panels.extend(noise_panels(name, law.as_ref(), reason.as_deref(), h));
             }
         }
         if !panels.is_empty() {
@@ -252,7 +195,19 @@ fn figures(fitted: &FittedTable, dir: &Path) -> anyhow::Result<usize> {
             }
         }
     }
-    if !sweep.is_empty() {
+    if !sweep_weathers.is_empty() {
+        // Figure 27: slope against reflectivity, solid ML and dashed seed
+        // quantile estimate, with a key for both.
+        let SweepData {
+            series,
+            names,
+            notes,
+        } = sweep_series(&sweep_weathers);
+        let sweep = SweepFigure {
+            series: &series,
+            group_names: &names,
+            notes: &notes,
+        };
         for ext in ["png", "svg"] {
             slope_vs_reflectivity(
                 &sweep,
@@ -265,25 +220,29 @@ fn figures(fitted: &FittedTable, dir: &Path) -> anyhow::Result<usize> {
     Ok(n)
 }
 
-fn noise_panels(name: &str, law: Option<&NoiseLaw>, h: &NoiseHistograms) -> [GaussianPanel; 2] {
+fn noise_panels(
+    name: &str,
+    law: Option<&NoiseLaw>,
+    reason: Option<&str>,
+    h: &NoiseHistograms,
+) -> [GaussianPanel; 2] {
+    let [(dl, dt), (rl, rt)] = noise_laws(name, law, reason);
     [
         GaussianPanel {
             title: format!("{name} distance (m)"),
             lo: h.distance.lo,
             step: h.distance.step,
             counts: h.distance.counts.clone(),
-            law: law.map(|l| (l.distance_m.mean, l.distance_m.std)),
-            truncation: law.map_or((None, None), |l| (l.distance_m.lower, l.distance_m.upper)),
+            law: dl,
+            truncation: dt,
         },
         GaussianPanel {
             title: format!("{name} reflectivity"),
             lo: h.reflectivity.lo,
             step: h.reflectivity.step,
             counts: h.reflectivity.counts.clone(),
-            law: law.map(|l| (l.reflectivity.mean, l.reflectivity.std)),
-            truncation: law.map_or((None, None), |l| {
-                (l.reflectivity.lower, l.reflectivity.upper)
-            }),
+            law: rl,
+            truncation: rt,
         },
     ]
 }
