@@ -265,6 +265,7 @@ fn kitti_projection_known_answer() {
     let dense = Densify {
         max_row_gap_px: 8,
         above_scan_m: Some(777.0),
+        ..Densify::default()
     };
     let dm = DepthMap::from_lidar(&cloud, &calib, 100, 60, &dense, "axis").unwrap();
     assert_eq!(dm.get(50, 30), 10.0);

@@ -18,6 +18,21 @@
 //!    one (ties: the left one).
 //!
 //! When several LiDAR points land on one pixel the nearest wins (z-buffer).
+//!
+//! **See-through returns.** A LiDAR beam passes through glass and through
+//! gaps a camera does not see through at its resolution: a car's windows
+//! give returns from the street behind the car. Projected, they are far
+//! measurements inside a near object, and the fill above would paint a block
+//! of far depth (thick rain haze) on the car's window. Before filling, a
+//! measured pixel is taken for such a return when, within
+//! [`Densify::see_through_px`] pixels, it is enclosed on two opposite sides
+//! (above and below, or left and right) by nearer measurements — nearer by
+//! more than [`Densify::see_through_margin`] — that agree with each other
+//! within the same margin (one surface around it, not a tree above and the
+//! road below). It then takes the farther of the two enclosing depths. The
+//! same idea as the hole closing of classical depth completion (Ku et al.,
+//! 2018, "In Defense of Classical Image Processing"), written for sparse
+//! LiDAR rows. `see_through_px = 0` turns it off.
 
 use std::path::Path;
 
@@ -37,6 +52,14 @@ pub struct Densify {
     /// (say 1000 m) fogs everything above the scan out, which suits open
     /// sky but not the trees and façades of a street.
     pub above_scan_m: Option<f32>,
+    /// How far (pixels, each way) a measurement is checked for being a
+    /// see-through return enclosed by a nearer surface (module docs);
+    /// default 96, 0 turns the check off.
+    pub see_through_px: usize,
+    /// Relative margin of that check: the enclosing measurements are nearer
+    /// than `d / (1 + margin)` and agree with each other within the same
+    /// relative margin (default 0.3).
+    pub see_through_margin: f32,
 }
 
 impl Default for Densify {
@@ -44,6 +67,8 @@ impl Default for Densify {
         Densify {
             max_row_gap_px: 8,
             above_scan_m: None,
+            see_through_px: 96,
+            see_through_margin: 0.3,
         }
     }
 }
@@ -184,6 +209,7 @@ impl DepthMap {
                 sparse[k] = d;
             }
         }
+        let sparse = drop_see_through(&sparse, w, h, densify);
         let metres = fill(sparse, w, h, densify).ok_or_else(|| InferError::Depth {
             source_name: source.to_string(),
             x: 0,
@@ -212,6 +238,68 @@ impl DepthMap {
     pub fn as_slice(&self) -> &[f32] {
         &self.metres
     }
+}
+
+/// Replaces see-through returns of a sparse map (NaN: no measurement) by the
+/// surface that encloses them (module docs). Reads `m`, writes a copy, so
+/// replacements never feed each other.
+fn drop_see_through(m: &[f32], w: usize, h: usize, densify: &Densify) -> Vec<f32> {
+    let win = densify.see_through_px;
+    let margin = densify.see_through_margin.max(0.0);
+    let mut out = m.to_vec();
+    if win == 0 {
+        return out;
+    }
+    // The nearest depth in a 3-pixel band across the walk at step k of a
+    // direction, if any pixel of the band is measured.
+    let band = |x: isize, y: isize, vertical: bool| -> Option<f32> {
+        let mut best: Option<f32> = None;
+        for o in -1..=1isize {
+            let (cx, cy) = if vertical { (x + o, y) } else { (x, y + o) };
+            if cx < 0 || cy < 0 || cx >= w as isize || cy >= h as isize {
+                continue;
+            }
+            let v = m[cy as usize * w + cx as usize];
+            if !v.is_nan() && best.is_none_or(|b| v < b) {
+                best = Some(v);
+            }
+        }
+        best
+    };
+    // Depth of the first measurement nearer than `limit` walking from
+    // (x, y) by (dx, dy), at most `win` steps.
+    let first_nearer = |x: usize, y: usize, dx: isize, dy: isize, limit: f32| -> Option<f32> {
+        (1..=win as isize).find_map(|k| {
+            band(x as isize + dx * k, y as isize + dy * k, dx == 0).filter(|&v| v < limit)
+        })
+    };
+    let same = |a: f32, b: f32| (a - b).abs() <= margin * a.min(b);
+    for y in 0..h {
+        for x in 0..w {
+            let d = m[y * w + x];
+            if d.is_nan() || !d.is_finite() {
+                continue;
+            }
+            let limit = d / (1.0 + margin);
+            let mut best: Option<f32> = None;
+            for ((ax, ay), (bx, by)) in [((0, -1), (0, 1)), ((-1, 0), (1, 0))] {
+                let (Some(a), Some(b)) = (
+                    first_nearer(x, y, ax, ay, limit),
+                    first_nearer(x, y, bx, by, limit),
+                ) else {
+                    continue;
+                };
+                if same(a, b) {
+                    let r = a.max(b);
+                    best = Some(best.map_or(r, |c: f32| c.max(r)));
+                }
+            }
+            if let Some(r) = best {
+                out[y * w + x] = r;
+            }
+        }
+    }
+    out
 }
 
 /// Nearest-neighbour fill of the NaN holes (module docs); `None` when there
@@ -314,6 +402,7 @@ mod tests {
         let d = Densify {
             max_row_gap_px: 0,
             above_scan_m: Some(500.0),
+            ..Densify::default()
         };
         let f = fill(m, 3, 5, &d).unwrap();
         let col1: Vec<f32> = (0..5).map(|y| f[y * 3 + 1]).collect();
@@ -324,6 +413,92 @@ mod tests {
             assert_eq!(f[y * 3], f[y * 3 + 1]);
             assert_eq!(f[y * 3 + 2], f[y * 3 + 1]);
         }
+    }
+
+    /// A sparse map like projected LiDAR: measured rows every `step` pixels,
+    /// every pixel of those rows measured, depth given by `depth(x, y)`.
+    fn rows(w: usize, h: usize, step: usize, depth: impl Fn(usize, usize) -> f32) -> Vec<f32> {
+        let mut m = vec![f32::NAN; w * h];
+        for y in (0..h).step_by(step) {
+            for x in 0..w {
+                m[y * w + x] = depth(x, y);
+            }
+        }
+        m
+    }
+
+    #[test]
+    fn a_window_in_a_near_car_takes_the_car_depth() {
+        // A car at 5 m covers x 20..80, y 10..50; its window (x 30..70,
+        // y 20..36) lets the beams through to a wall at 30 m. Rows every 4 px.
+        let car = |x: usize, y: usize| (20..80).contains(&x) && (10..50).contains(&y);
+        let window = |x: usize, y: usize| (30..70).contains(&x) && (20..36).contains(&y);
+        let m = rows(100, 60, 4, |x, y| {
+            if car(x, y) && !window(x, y) {
+                5.0
+            } else {
+                30.0
+            }
+        });
+        let f = fill(
+            drop_see_through(&m, 100, 60, &Densify::default()),
+            100,
+            60,
+            &Densify::default(),
+        )
+        .unwrap();
+        for y in 20..36 {
+            for x in 30..70 {
+                assert_eq!(f[y * 100 + x], 5.0, "window pixel ({x}, {y})");
+            }
+        }
+        // The wall beside the car stays where it is.
+        for y in 0..60 {
+            assert_eq!(f[y * 100 + 5], 30.0, "wall pixel (5, {y})");
+            assert_eq!(f[y * 100 + 95], 30.0, "wall pixel (95, {y})");
+        }
+        // Off, the window shows the wall: the block this pass removes.
+        let off = Densify {
+            see_through_px: 0,
+            ..Densify::default()
+        };
+        let g = fill(drop_see_through(&m, 100, 60, &off), 100, 60, &off).unwrap();
+        assert_eq!(g[28 * 100 + 50], 30.0);
+    }
+
+    #[test]
+    fn a_far_house_between_a_tree_and_the_road_is_kept() {
+        // Rows 0..20: a tree at 8 m; rows 20..40: a house at 30 m seen
+        // between the tree and the road; rows 40..60: road at 15 m. The two
+        // nearer surfaces disagree (8 vs 15 m): the house is real.
+        let m = rows(50, 60, 4, |_, y| match y {
+            0..20 => 8.0,
+            20..40 => 30.0,
+            _ => 15.0,
+        });
+        let out = drop_see_through(&m, 50, 60, &Densify::default());
+        for y in (20..40).step_by(4) {
+            assert_eq!(out[y * 50 + 25], 30.0, "house row {y}");
+        }
+        // A gap wider than the window is not closed either: a 5 m surface
+        // with a 240-px opening onto 30 m keeps the opening's far middle.
+        let m = rows(
+            400,
+            12,
+            4,
+            |x, _| if (80..320).contains(&x) { 30.0 } else { 5.0 },
+        );
+        let out = drop_see_through(&m, 400, 12, &Densify::default());
+        assert_eq!(out[4 * 400 + 200], 30.0);
+        // A small opening (20 px) in the same surface is closed.
+        let m = rows(
+            200,
+            12,
+            4,
+            |x, _| if (90..110).contains(&x) { 30.0 } else { 5.0 },
+        );
+        let out = drop_see_through(&m, 200, 12, &Densify::default());
+        assert_eq!(out[4 * 200 + 100], 5.0);
     }
 
     #[test]
