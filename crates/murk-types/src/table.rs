@@ -64,6 +64,59 @@ pub struct TableLidar {
     pub range_scale: f64,
 }
 
+/// Unit of the near-range counts of a table.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CountUnit {
+    /// Returns per revolution (per scan) of the sensor.
+    #[default]
+    PerRevolution,
+    /// Returns per recording, whatever its length.
+    PerRecording,
+}
+
+/// The firing geometry of a LiDAR as the fit measured it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SensorGeometry {
+    /// `measured` (from the clear recordings) or `declared` (campaign.toml,
+    /// when the recordings could not tell).
+    pub source: String,
+    /// Clear recordings measured.
+    pub recordings: u32,
+    /// Scans (revolutions of a `.pcap`, whole files otherwise) measured.
+    pub frames: u32,
+    /// Median azimuth step of the measured rings, degrees.
+    pub azimuth_step_deg: f64,
+    /// `azimuth_resolution_deg` of campaign.toml.
+    pub declared_azimuth_step_deg: f64,
+    /// Per ring.
+    pub rings: Vec<RingGeometry>,
+}
+
+/// The measured firing grid of one ring.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RingGeometry {
+    /// Ring number.
+    pub ring: u16,
+    /// Azimuth step between consecutive firings, degrees (360 / bins).
+    pub azimuth_step_deg: f64,
+    /// Azimuth of the firing grid modulo the step, degrees in `[0, step)`:
+    /// pairing cells are centred on `phase + k·step`.
+    pub azimuth_phase_deg: f64,
+    /// Resultant length of the firings' phases (1: every revolution fires at
+    /// the same azimuths, phase-locked; near 0: free-running).
+    pub phase_locking: f64,
+    /// Median elevation of the ring's returns, degrees (null without returns).
+    pub elevation_deg: Option<f64>,
+    /// The elevation campaign.toml declares for the ring.
+    pub declared_elevation_deg: Option<f64>,
+    /// Returns the ring's step was measured from.
+    pub returns: u64,
+    /// False when the ring had too few returns and took the other rings'
+    /// step (or the declared one).
+    pub measured: bool,
+}
+
 /// Everything fitted for one degraded weather.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct WeatherCoefficients {
