@@ -279,8 +279,7 @@ fn a_pcap_becomes_one_file_per_frame() {
         stdout.contains(&format!(
             "split into one file per frame) into {} pcd files",
             names.len()
-        ))
-            && stdout.contains("(52 frames)")
+        )) && stdout.contains("(52 frames)")
             && stdout.contains("2 of the 52 frames written are partial"),
         "{stdout}"
     );

@@ -362,7 +362,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             notes.push(format!(
                 "{} foreign packet{} skipped",
                 frames.notes.foreign_packets,
-                plural(frames.notes.foreign_packets)
+                if frames.notes.foreign_packets == 1 {
+                    ""
+                } else {
+                    "s"
+                }
             ));
         }
         if !notes.is_empty() {
