@@ -62,6 +62,20 @@ pub struct TableLidar {
     /// Range-scale coefficient of the fitted sensor: vanishing distance =
     /// slope × MOR × range_scale.
     pub range_scale: f64,
+    /// The firing geometry the fit paired on: measured from the clear
+    /// recordings (or the declared one when it could not be measured).
+    /// Absent in tables written before it was measured.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub geometry: Option<SensorGeometry>,
+    /// What the recordings contradict in `campaign.toml` (azimuth step, ring
+    /// elevations, ring count), each with both values.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub warnings: Vec<String>,
+    /// Unit of every near-range count in the table (`points_per_scan` and
+    /// the count laws). A table without it counted per recording of one
+    /// revolution, which is the same as per revolution.
+    #[serde(default)]
+    pub count_unit: CountUnit,
 }
 
 /// Unit of the near-range counts of a table.
@@ -303,8 +317,12 @@ pub struct NoiseLaw {
     pub distance_m: Gaussian,
     /// Law of the calibrated reflectivity.
     pub reflectivity: Gaussian,
-    /// Mean number per recording (scan).
+    /// Mean number per scan, in the table's `lidar.count_unit` (per
+    /// revolution since that field exists).
     pub points_per_scan: f64,
+    /// Mean number per recording (a recording may hold many revolutions).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub points_per_recording: Option<f64>,
     /// Returns the laws were fitted on.
     #[serde(default)]
     pub points: u64,
@@ -763,6 +781,7 @@ mod tests {
                 std_std_error: None,
             },
             points_per_scan: 41.0,
+            points_per_recording: Some(41.0),
             points: 410,
             visible_fraction: Some(0.9),
             count_law: Some(CountLaw::Power {
@@ -814,6 +833,9 @@ mod tests {
             lidar: TableLidar {
                 model: "VLP16".into(),
                 range_scale: 1.0,
+                geometry: None,
+                warnings: vec![],
+                count_unit: CountUnit::PerRevolution,
             },
             weathers: BTreeMap::from([(WeatherClass::Fog, fog)]),
             absent: BTreeMap::from([(WeatherClass::Snow, "no recording".into())]),
