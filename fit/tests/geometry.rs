@@ -120,14 +120,15 @@ fn phased_jittered_firings_pair() {
 /// A free-running unit of the generator: every revolution starts at its own
 /// phase, and the generator keeps each ray's range, so a whole revolution
 /// shifts by up to one step against the grid. The measured step is right
-/// (1°, locking ≈ 0.2–0.35), but pairing is greedy (own cell first, then
-/// the neighbours): at each range edge a shifted revolution's return is
-/// taken by the wrong cell's reference and its own direction counts as
-/// lost. Measured over 13 seeds: 0.85–0.99 (0.85–0.96 on the old grid);
-/// the real free-running VLP-16, whose shifts are fractional, pairs 0.985.
-/// Needs a matching pairing (augmenting paths along the ring).
+/// (1°, locking ≈ 0.2–0.35), but the clear leave-one-out rate compares each
+/// recording's cell with the median of the others' in the *same* cell (no
+/// neighbour search, unlike pairing): at every range edge a revolution
+/// shifted across the cell edge counts one return as lost. Measured over 13
+/// seeds: 0.85–0.99 (0.85–0.96 on the old grid); the real free-running
+/// VLP-16, whose shifts are fractional, gives 0.985. Needs a leave-one-out
+/// that pairs like the degraded recordings do.
 #[test]
-#[ignore = "greedy pairing loses one return per range edge in a whole-step-shifted revolution (0.85-0.99 over seeds): needs matching"]
+#[ignore = "the clear leave-one-out has no neighbour search: a whole-step-shifted revolution loses one return per range edge (0.85-0.99 over seeds)"]
 fn free_running_firings_pair() {
     for seed in [4, 5, 6] {
         let (_d, path) = generated(seed, |c| {
