@@ -57,6 +57,12 @@ pub struct RecordingRow {
     pub occluders: Vec<u32>,
     /// Rays of the recording (cells × revolutions of the reference).
     pub rays: u64,
+    /// Scans of the recording (revolutions of a `.pcap`, 1 for other files).
+    pub frames: u32,
+    /// Revolutions of the recording: its scans times the reference's
+    /// revolutions per scan. Near-range counts per revolution are
+    /// `ghosts / revolutions`.
+    pub revolutions: u64,
 }
 
 /// Resolution of the per-recording occluder histograms, metres.
@@ -184,8 +190,10 @@ pub struct CellTable {
     ln_r: Vec<f64>,
     hits: Vec<u16>,
     n_cells: usize,
-    /// Rays per recording: cells × revolutions (median expected hits).
+    /// Rays per scan: cells × revolutions per scan (median expected hits).
     rays: u64,
+    /// Revolutions per scan.
+    revolutions: u64,
 }
 
 impl CellTable {
@@ -203,6 +211,7 @@ impl CellTable {
                 .collect(),
             hits: cells.iter().map(|&c| reference.hits(c as usize)).collect(),
             rays: reference.grid().cells() as u64 * reference.revolutions() as u64,
+            revolutions: reference.revolutions() as u64,
             cells,
             n_cells: reference.grid().cells(),
         }
@@ -243,17 +252,19 @@ impl WeatherAcc {
         let ln_m = (mor * range_scale).ln();
         let mut kept = 0u64;
         let mut total = 0u64;
-        let mut hidden = vec![0u16; 0];
+        let mut hidden = vec![0u32; 0];
         if !tally.occluded.is_empty() {
-            hidden = vec![0u16; cells.n_cells];
+            hidden = vec![0u32; cells.n_cells];
             for &c in &tally.occluded {
                 hidden[c as usize] = hidden[c as usize].saturating_add(1);
             }
         }
+        let frames = tally.frames.max(1);
+        let rays = cells.rays * frames as u64;
         for (j, &c) in cells.cells.iter().enumerate() {
             let k = tally.matched[c as usize];
-            entry.1[c as usize] += k as u32;
-            let h = cells.hits[j];
+            entry.1[c as usize] += k;
+            let h = cells.hits[j] as u32 * frames;
             // Clear returns hidden behind a ghost or ring return are neither
             // kept nor lost: they leave the survival trials.
             let gone = hidden.get(c as usize).copied().unwrap_or(0);
@@ -264,8 +275,8 @@ impl WeatherAcc {
             kept += k as u64;
             total += h as u64;
         }
-        self.ghost.add(&tally.ghosts, &tally.occluders, cells.rays);
-        self.ring.add(&tally.rings, &tally.occluders, cells.rays);
+        self.ghost.add(&tally.ghosts, &tally.occluders, rays);
+        self.ring.add(&tally.rings, &tally.occluders, rays);
         let reach = params.ghost_range_m()[1].max(params.ring_range_m()[1]);
         let mut occluders = vec![0u32; (reach / ROW_OCCLUDER_STEP_M).ceil().max(1.0) as usize];
         for &r in &tally.occluders {
@@ -287,7 +298,9 @@ impl WeatherAcc {
             far: tally.far,
             points: tally.points,
             occluders,
-            rays: cells.rays,
+            rays,
+            frames,
+            revolutions: frames as u64 * cells.revolutions.max(1),
         });
     }
 

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use murk_campaign::Campaign;
 use murk_types::{
-    ClearCoefficients, CoefficientTable, ExcludedRecording, InputDigest, Provenance,
+    ClearCoefficients, CoefficientTable, CountUnit, ExcludedRecording, InputDigest, Provenance,
     RadarCoefficients, TABLE_FORMAT, TableLidar, WeatherClass,
 };
 use rayon::prelude::*;
@@ -14,8 +14,8 @@ use rayon::prelude::*;
 use crate::assemble::{RainSample, WeatherContext, rain_conversion, uncertainty, weather};
 use crate::diagnostics::Diagnostics;
 use crate::driver::{
-    DegradedJob, FitInputs, RecordingInput, accumulate_degraded, build_reference, read_file,
-    read_radar, relative, sha256_hex,
+    DegradedJob, FitInputs, RecordingInput, accumulate_degraded, build_reference, measure_geometry,
+    read_file, read_radar, relative, sha256_hex,
 };
 use crate::radar::{Detections, RadarReference};
 use crate::reference::CellGrid;
@@ -63,7 +63,11 @@ fn fit_inputs(inputs: &FitInputs, params: &FitValidParams) -> Result<FittedTable
             reason: "no recording was selected as clear (rules and review), so no degraded recording can be paired".into(),
         });
     }
-    let grid = CellGrid::new(&inputs.lidar);
+    let (mut geometry, geometry_warnings) = measure_geometry(inputs)?;
+    if params.declared_geometry() {
+        geometry = crate::geometry::declared(&inputs.lidar);
+    }
+    let grid = CellGrid::from_geometry(&geometry);
     let (reference, mut digests, empty_clear) = build_reference(inputs, &clear, &grid, params)?;
     // Clear recordings the reference is built from (not the empty ones).
     let clear_used = clear.len() - empty_clear.len();
@@ -230,6 +234,9 @@ fn fit_inputs(inputs: &FitInputs, params: &FitValidParams) -> Result<FittedTable
         lidar: TableLidar {
             model: inputs.lidar.model.clone(),
             range_scale,
+            geometry: Some(geometry),
+            warnings: geometry_warnings,
+            count_unit: CountUnit::PerRevolution,
         },
         weathers,
         absent,
@@ -378,6 +385,21 @@ impl FittedTable {
         let t = &self.table;
         let mut s = String::new();
         let _ = writeln!(s, "campaign {} ({})", t.campaign, t.lidar.model);
+        if let Some(g) = &t.lidar.geometry {
+            let _ = writeln!(
+                s,
+                "  lidar geometry: {} azimuth step {:.4}° (declared {}), {} rings, from {} clear recordings ({} scans)",
+                g.source,
+                g.azimuth_step_deg,
+                g.declared_azimuth_step_deg,
+                g.rings.len(),
+                g.recordings,
+                g.frames
+            );
+        }
+        for w in &t.lidar.warnings {
+            let _ = writeln!(s, "  warning: {w}");
+        }
         if let Some(c) = &t.clear {
             let _ = writeln!(
                 s,

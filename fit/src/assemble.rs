@@ -269,16 +269,23 @@ fn noise_law(
     let r = r.ok_or_else(|| {
         format!("{n} {name} returns are too few or too concentrated for a reflectivity law")
     })?;
-    let per_scan = counts.iter().map(|c| c.1 as f64).sum::<f64>() / counts.len().max(1) as f64;
+    // Counts per revolution: a recording of many revolutions (a one-minute
+    // `.pcap` holds ~600) contributes its count over its revolutions.
+    let all: f64 = counts.iter().map(|c| c.1 as f64).sum();
+    let revolutions: f64 = counts.iter().map(|c| c.0.revolutions.max(1) as f64).sum();
+    let per_scan = all / revolutions.max(1.0);
+    let per_recording = all / counts.len().max(1) as f64;
     // Each recording's count is seen through its own visibility: denser
-    // weather hides more of its own returns behind nearer ones.
+    // weather hides more of its own returns behind nearer ones; its exposure
+    // is its number of revolutions, so the law is per revolution.
     let exposed: Vec<(f64, u64, f64)> = counts
         .iter()
         .map(|(row, c)| {
             (
                 row.mor,
                 *c,
-                row_visibility(row, d.mean, d.std, window[0], window[1]),
+                row_visibility(row, d.mean, d.std, window[0], window[1])
+                    * row.revolutions.max(1) as f64,
             )
         })
         .collect();
@@ -323,6 +330,7 @@ fn noise_law(
             std_std_error: r.std_std_error.is_finite().then_some(r.std_std_error),
         },
         points_per_scan: per_scan,
+        points_per_recording: Some(per_recording),
         points: n,
         visible_fraction: Some(d.visible),
         count_law,

@@ -1,8 +1,12 @@
 //! The thin I/O driver: streams a campaign's recordings through the
 //! statistical core.
 //!
+//! 0. The firing geometry is measured from the first clear recordings
+//!    ([`measure_geometry`]); the cell grid is centred on it.
 //! 1. The clear recordings are read in parallel and reduced to cell images;
 //!    the [`ClearReference`] is built from them and the images dropped.
+//!    A `.pcap` is read as its revolutions ([`read_scans`]); every count a
+//!    cell expects is per scan, times the recording's scans.
 //! 2. The degraded recordings are read in parallel by a fixed pool of workers
 //!    (one per rayon thread), each pairing its recordings with the reference
 //!    and adding them to its own per-weather accumulators; the accumulators
@@ -21,12 +25,15 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use murk_campaign::Campaign;
 use murk_io::ReadOptions;
-use murk_types::{ExcludedRecording, LidarSpec, PointFormat, WeatherClass};
+use murk_types::{
+    ExcludedRecording, LidarSpec, PointCloud, PointFormat, SensorGeometry, WeatherClass,
+};
 use rayon::prelude::*;
 use sha2::{Digest, Sha256};
 
 use crate::accumulate::{CellTable, WeatherAcc};
-use crate::pairing::pair_recording;
+use crate::geometry::GeometryAcc;
+use crate::pairing::pair_frames;
 use crate::radar::Detections;
 use crate::reference::{CellGrid, CellImage, CellPoint, ClearReference, cell_points};
 use crate::survival::Partition;
@@ -161,29 +168,111 @@ pub fn read_file(path: &Path) -> Result<Vec<u8>, FitError> {
     })
 }
 
-/// Reads one LiDAR recording: its points placed in the grid and the file's
-/// SHA-256.
-pub fn read_lidar(
-    path: &Path,
-    spec: &LidarSpec,
-    grid: &CellGrid,
-) -> Result<(Vec<CellPoint>, String), FitError> {
+/// Reads one LiDAR recording as scans: one per revolution of a `.pcap`
+/// (partial first and last revolutions left out, see [`full_revolutions`]), the
+/// whole file for every other format; calibrated intensity. Returns the scans
+/// and the file's SHA-256.
+pub fn read_scans(path: &Path, spec: &LidarSpec) -> Result<(Vec<PointCloud>, String), FitError> {
     let opts = ReadOptions {
         lidar: Some(spec.clone()),
         intensity_scale: spec.intensity_scale,
         ..Default::default()
     };
     let format = opts.format_of(path)?;
-    let (mut cloud, digest) = if format == PointFormat::Pcap {
-        let cloud = murk_io::read_cloud(path, &opts)?;
-        (cloud, sha256_hex(&read_file(path)?))
+    let (mut frames, digest) = if format == PointFormat::Pcap {
+        let frames = murk_io::read_frames_noted(path, &opts)?;
+        (full_revolutions(frames), sha256_hex(&read_file(path)?))
     } else {
         let bytes = read_file(path)?;
         let digest = sha256_hex(&bytes);
-        (murk_io::parse_cloud(&bytes, format, path, &opts)?, digest)
+        (
+            vec![murk_io::parse_cloud(&bytes, format, path, &opts)?],
+            digest,
+        )
     };
-    cloud.to_calibrated();
-    Ok((cell_points(grid, &cloud, path)?, digest))
+    for f in &mut frames {
+        f.to_calibrated();
+    }
+    Ok((frames, digest))
+}
+
+/// A capture's full revolutions: the first and last ones that murk-io flags
+/// partial (they do not cover 360°: a capture starts and stops anywhere in a
+/// turn) are left out, interior revolutions are all kept however few their
+/// returns (dense fog). A capture shorter than one full revolution is kept
+/// whole, as one partial scan is better than none.
+pub fn full_revolutions(frames: murk_io::Frames) -> Vec<PointCloud> {
+    if frames.partial.iter().all(|&p| p) {
+        return frames.clouds;
+    }
+    frames
+        .clouds
+        .into_iter()
+        .zip(frames.partial)
+        .filter_map(|(c, p)| (!p).then_some(c))
+        .collect()
+}
+
+/// Reads one LiDAR recording: its points placed in the grid, its number of
+/// scans and the file's SHA-256.
+pub fn read_lidar_frames(
+    path: &Path,
+    spec: &LidarSpec,
+    grid: &CellGrid,
+) -> Result<(Vec<CellPoint>, u32, String), FitError> {
+    let (frames, digest) = read_scans(path, spec)?;
+    let mut points = Vec::with_capacity(frames.iter().map(PointCloud::len).sum());
+    for f in &frames {
+        points.extend(cell_points(grid, f, path)?);
+    }
+    Ok((points, frames.len().max(1) as u32, digest))
+}
+
+/// Reads one LiDAR recording: its points (every scan) placed in the grid and
+/// the file's SHA-256.
+pub fn read_lidar(
+    path: &Path,
+    spec: &LidarSpec,
+    grid: &CellGrid,
+) -> Result<(Vec<CellPoint>, String), FitError> {
+    let (points, _, digest) = read_lidar_frames(path, spec, grid)?;
+    Ok((points, digest))
+}
+
+/// The firing geometry measured from the first
+/// [`MAX_RECORDINGS`](crate::geometry::MAX_RECORDINGS) clear recordings of
+/// `inputs` (up to
+/// [`MAX_FRAMES_PER_RECORDING`](crate::geometry::MAX_FRAMES_PER_RECORDING)
+/// scans each), and what it contradicts in the declared LiDAR.
+pub fn measure_geometry(inputs: &FitInputs) -> Result<(SensorGeometry, Vec<String>), FitError> {
+    let clear: Vec<&RecordingInput> = inputs
+        .recordings
+        .iter()
+        .filter(|r| r.class == WeatherClass::Clear)
+        .take(crate::geometry::MAX_RECORDINGS)
+        .collect();
+    let accs: Vec<Result<GeometryAcc, FitError>> = clear
+        .par_iter()
+        .map(|r| {
+            let (frames, _) = read_scans(&r.lidar, &inputs.lidar)?;
+            let mut acc = GeometryAcc::new();
+            acc.start_recording();
+            for f in frames
+                .iter()
+                .take(crate::geometry::MAX_FRAMES_PER_RECORDING)
+            {
+                acc.add_frame(f);
+            }
+            Ok(acc)
+        })
+        .collect();
+    let mut all = GeometryAcc::new();
+    for a in accs {
+        all.merge(a?);
+    }
+    let g = all.finish(&inputs.lidar);
+    let w = crate::geometry::warnings(&g, &inputs.lidar);
+    Ok((g, w))
 }
 
 /// Reads a radar file (`x,y,z,rcs,velocity` with a header).
@@ -296,8 +385,9 @@ pub fn build_reference(
     let images: Vec<Result<(Option<CellImage>, String), FitError>> = recs
         .par_iter()
         .map(|r| {
-            let (points, digest) = read_lidar(&r.lidar, &inputs.lidar, grid)?;
-            let img = (!points.is_empty()).then(|| CellImage::from_points(&points, grid.cells()));
+            let (points, frames, digest) = read_lidar_frames(&r.lidar, &inputs.lidar, grid)?;
+            let img =
+                (!points.is_empty()).then(|| CellImage::from_frames(&points, frames, grid.cells()));
             Ok((img, digest))
         })
         .collect();
@@ -367,13 +457,14 @@ pub fn accumulate_degraded(
         },
         |i, s| {
             let job = &jobs[i];
-            let (points, digest) = read_lidar(&job.input.lidar, &inputs.lidar, grid)?;
+            let (points, frames, digest) =
+                read_lidar_frames(&job.input.lidar, &inputs.lidar, grid)?;
             s.digests.push((i, digest));
             if points.is_empty() {
                 s.empty.push(i);
                 return Ok(());
             }
-            let tally = pair_recording(reference, &points, params);
+            let tally = pair_frames(reference, &points, frames, params);
             s.accs
                 .entry(job.input.class)
                 .or_insert_with(|| WeatherAcc::new(params, partition))

@@ -61,6 +61,7 @@ impl Band {
 /// | `ghost_range_m` | [3, 10) | range window of *ghost* returns | ring hi ≤ lo < hi |
 /// | `pairing_tolerance_m` | 0.5 | absolute range tolerance for a degraded return to pair with the clear one | ≥ 0 |
 /// | `pairing_tolerance_rel` | 0.02 | relative range tolerance (the larger of the two applies) | ≥ 0 |
+/// | `declared_geometry` | false | pair on campaign.toml's azimuth grid instead of the firing grid measured from the clear recordings (see [`crate::geometry`]); disagreements are warned either way | |
 /// | `azimuth_neighbours` | 1 | azimuth bins either side searched when the own cell does not pair | 0–4 |
 /// | `reference_min_presence` | 0.5 | share of clear recordings a cell must return in to enter the reference | (0, 1] |
 /// | `min_points_per_bin` | 50 | *no change* returns a MOR bin needs for its quantile | ≥ 1 |
@@ -90,6 +91,7 @@ pub struct FitValidParams {
     pub(crate) ghost_range_m: [f64; 2],
     pub(crate) pairing_tolerance_m: f64,
     pub(crate) pairing_tolerance_rel: f64,
+    pub(crate) declared_geometry: bool,
     pub(crate) azimuth_neighbours: u32,
     pub(crate) reference_min_presence: f64,
     pub(crate) min_points_per_bin: u64,
@@ -118,6 +120,7 @@ impl Default for FitParams {
             ghost_range_m: [3.0, 10.0],
             pairing_tolerance_m: 0.5,
             pairing_tolerance_rel: 0.02,
+            declared_geometry: false,
             azimuth_neighbours: 1,
             reference_min_presence: 0.5,
             min_points_per_bin: 50,
@@ -169,6 +172,8 @@ impl FitParams {
         pairing_tolerance_m: f64);
     setter!(/// Sets `pairing_tolerance_rel`.
         pairing_tolerance_rel: f64);
+    setter!(/// Sets `declared_geometry`.
+        declared_geometry: bool);
     setter!(/// Sets `azimuth_neighbours`.
         azimuth_neighbours: u32);
     setter!(/// Sets `reference_min_presence`.
@@ -360,6 +365,10 @@ impl FitValidParams {
     /// the relative tolerance.
     pub fn pairing_tolerance(&self, r: f64) -> f64 {
         self.pairing_tolerance_m.max(self.pairing_tolerance_rel * r)
+    }
+    /// Pair on the declared grid rather than the measured one.
+    pub fn declared_geometry(&self) -> bool {
+        self.declared_geometry
     }
     /// Azimuth bins searched either side.
     pub fn azimuth_neighbours(&self) -> u32 {

@@ -79,6 +79,7 @@ pub mod diagnostics;
 #[allow(clippy::disallowed_methods, clippy::disallowed_types)]
 pub mod driver;
 mod error;
+pub mod geometry;
 mod hyperparams;
 pub mod pairing;
 pub mod quantile_slope;

@@ -3,7 +3,8 @@
 //! Every degraded return is first offered to its own cell: it pairs with the
 //! clear return when its range is within the pairing tolerance and the cell
 //! still has an unpaired clear return (a cell expects as many returns per
-//! recording as the clear recordings had). Returns left over are offered to
+//! scan as the clear scans had, times the recording's scans: a `.pcap` of 600
+//! revolutions expects 600 times what a file of one does). Returns left over are offered to
 //! the neighbouring azimuth bins (firing azimuths jitter across bin edges
 //! between revolutions). What pairs is *no change*; clear returns left
 //! unpaired have *disappeared*. A degraded return that pairs nowhere is
@@ -20,8 +21,11 @@ use crate::reference::{CellPoint, ClearReference};
 /// What one degraded recording contributes.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct RecordingTally {
-    /// Paired (no change) returns per cell, at most the cell's expected hits.
-    pub matched: Vec<u16>,
+    /// Paired (no change) returns per cell, at most the cell's expected hits
+    /// times [`RecordingTally::frames`].
+    pub matched: Vec<u32>,
+    /// Scans of the recording (revolutions of a `.pcap`, 1 otherwise).
+    pub frames: u32,
     /// `(range, reflectivity)` of the ghost returns.
     pub ghosts: Vec<(f32, f32)>,
     /// `(range, reflectivity)` of the ring returns.
@@ -48,13 +52,26 @@ impl RecordingTally {
     }
 }
 
-/// Pairs the returns of one degraded (or clear) recording with `reference`.
+/// Pairs the returns of one degraded (or clear) single-scan recording with
+/// `reference`.
 pub fn pair_recording(
     reference: &ClearReference,
     points: &[CellPoint],
     params: &FitValidParams,
 ) -> RecordingTally {
-    pair(reference, points, params, None)
+    pair(reference, points, 1, params, None)
+}
+
+/// Pairs the returns of a recording of `frames` scans (all its points, any
+/// order) with `reference`: each cell expects `frames` times its hits per
+/// scan.
+pub fn pair_frames(
+    reference: &ClearReference,
+    points: &[CellPoint],
+    frames: u32,
+    params: &FitValidParams,
+) -> RecordingTally {
+    pair(reference, points, frames, params, None)
 }
 
 /// A paired (no change) return: the reference cell it paired with and its
@@ -74,25 +91,38 @@ pub fn pair_recording_detailed(
     points: &[CellPoint],
     params: &FitValidParams,
 ) -> (RecordingTally, Vec<Pair>) {
+    pair_frames_detailed(reference, points, 1, params)
+}
+
+/// [`pair_frames`], also listing every pair.
+pub fn pair_frames_detailed(
+    reference: &ClearReference,
+    points: &[CellPoint],
+    frames: u32,
+    params: &FitValidParams,
+) -> (RecordingTally, Vec<Pair>) {
     let mut pairs = Vec::new();
-    let t = pair(reference, points, params, Some(&mut pairs));
+    let t = pair(reference, points, frames, params, Some(&mut pairs));
     (t, pairs)
 }
 
 fn pair(
     reference: &ClearReference,
     points: &[CellPoint],
+    frames: u32,
     params: &FitValidParams,
     mut pairs: Option<&mut Vec<Pair>>,
 ) -> RecordingTally {
     let grid = reference.grid();
+    let frames = frames.max(1);
     let mut t = RecordingTally {
         matched: vec![0; grid.cells()],
+        frames,
         points: points.len() as u64,
         ..Default::default()
     };
-    let try_pair = |matched: &mut [u16], cell: usize, range: f32| -> bool {
-        let h = reference.hits(cell);
+    let try_pair = |matched: &mut [u32], cell: usize, range: f32| -> bool {
+        let h = reference.hits(cell) as u32 * frames;
         if h == 0 || matched[cell] >= h {
             return false;
         }
@@ -185,6 +215,7 @@ mod tests {
             range: vec![10.0, 20.0, 30.0, 5.0, 4.0],
             reflectivity: vec![5.0, 15.0, 50.0, 2.0, 3.0],
             hits: vec![1; 5],
+            frames: 1,
         };
         let mut b = a.clone();
         b.range[4] = 8.0;

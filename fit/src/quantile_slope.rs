@@ -239,6 +239,7 @@ mod tests {
             range: (1..=100).map(|r| r as f32).collect(),
             reflectivity: (0..100).map(|c| if c < 50 { 5.0 } else { 50.0 }).collect(),
             hits: vec![1; 100],
+            frames: 1,
         };
         let p = FitParams::default().check().unwrap();
         ClearReference::build(grid, &[img.clone(), img], &p)

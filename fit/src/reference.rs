@@ -21,66 +21,101 @@
 //! a reference built **without** it (leave-one-out), the clear-weather
 //! baseline of Table 7 and the dropout ε.
 
-use murk_types::{LidarSpec, PointCloud};
+use murk_types::{LidarSpec, PointCloud, SensorGeometry};
 use std::path::Path;
 
 use crate::{FitError, FitValidParams};
 
-/// The (ring, azimuth bin) grid of a LiDAR.
+/// The (ring, azimuth bin) grid of a LiDAR: per ring, `bins` cells of
+/// `360 / bins` degrees centred on `phase + k · width` (the ring's firings,
+/// see [`crate::geometry`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct CellGrid {
-    rings: usize,
-    az_bins: usize,
-    az_res_deg: f64,
+    /// Per ring: (first cell, bins, width in degrees, phase in degrees).
+    rings: Vec<RingBins>,
+    cells: usize,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct RingBins {
+    offset: usize,
+    bins: usize,
+    width: f64,
+    phase: f64,
 }
 
 impl CellGrid {
-    /// The grid of `spec` (rings × 360°/azimuth resolution).
+    /// The declared grid of `spec` (rings × 360°/azimuth resolution), cells
+    /// centred on multiples of the resolution.
     pub fn new(spec: &LidarSpec) -> Self {
+        CellGrid::from_geometry(&crate::geometry::declared(spec))
+    }
+
+    /// The grid of a (measured) geometry: each ring its own step and phase.
+    pub fn from_geometry(g: &SensorGeometry) -> Self {
+        let mut rings = Vec::with_capacity(g.rings.len());
+        let mut offset = 0;
+        for r in &g.rings {
+            let bins = (360.0 / r.azimuth_step_deg).round().max(1.0) as usize;
+            let width = 360.0 / bins as f64;
+            rings.push(RingBins {
+                offset,
+                bins,
+                width,
+                phase: r.azimuth_phase_deg.rem_euclid(width),
+            });
+            offset += bins;
+        }
         CellGrid {
-            rings: spec.rings(),
-            az_bins: spec.azimuth_bins(),
-            az_res_deg: 360.0 / spec.azimuth_bins() as f64,
+            rings,
+            cells: offset,
         }
     }
 
     /// Number of cells.
     pub fn cells(&self) -> usize {
-        self.rings * self.az_bins
+        self.cells
     }
 
     /// Number of rings.
     pub fn rings(&self) -> usize {
-        self.rings
+        self.rings.len()
     }
 
-    /// Azimuth bins per ring.
-    pub fn azimuth_bins(&self) -> usize {
-        self.az_bins
+    /// Azimuth bins of `ring` (0 outside the grid).
+    pub fn azimuth_bins(&self, ring: usize) -> usize {
+        self.rings.get(ring).map_or(0, |r| r.bins)
+    }
+
+    /// The ring of `cell`.
+    #[inline]
+    pub fn ring_of(&self, cell: usize) -> usize {
+        self.rings
+            .partition_point(|r| r.offset <= cell)
+            .saturating_sub(1)
+    }
+
+    /// The azimuth of the centre of `cell`, degrees in `[0, 360)`.
+    pub fn azimuth_deg(&self, cell: usize) -> f64 {
+        let r = &self.rings[self.ring_of(cell)];
+        (r.phase + (cell - r.offset) as f64 * r.width).rem_euclid(360.0)
     }
 
     /// The cell of a point, `None` when its ring is outside the grid.
     #[inline]
     pub fn cell_of(&self, ring: u16, x: f32, y: f32) -> Option<usize> {
-        let ring = ring as usize;
-        if ring >= self.rings {
-            return None;
-        }
-        let mut az = (y as f64).atan2(x as f64).to_degrees();
-        if az < 0.0 {
-            az += 360.0;
-        }
-        let bin = ((az / self.az_res_deg) as usize) % self.az_bins;
-        Some(ring * self.az_bins + bin)
+        let r = self.rings.get(ring as usize)?;
+        let az = crate::geometry::azimuth_deg(x, y);
+        let k = ((az - r.phase) / r.width + 0.5).floor() as i64;
+        Some(r.offset + k.rem_euclid(r.bins as i64) as usize)
     }
 
     /// The cell `offset` azimuth bins away on the same ring (wrapping).
     #[inline]
     pub fn shifted(&self, cell: usize, offset: i64) -> usize {
-        let ring = cell / self.az_bins;
-        let bin = (cell % self.az_bins) as i64;
-        let n = self.az_bins as i64;
-        ring * self.az_bins + (bin + offset).rem_euclid(n) as usize
+        let r = &self.rings[self.ring_of(cell)];
+        let bin = (cell - r.offset) as i64;
+        r.offset + (bin + offset).rem_euclid(r.bins as i64) as usize
     }
 }
 
@@ -147,7 +182,10 @@ pub struct CellImage {
     /// Median calibrated reflectivity of the cell's returns.
     pub reflectivity: Vec<f32>,
     /// Number of returns in the cell (revolutions that hit it).
-    pub hits: Vec<u16>,
+    pub hits: Vec<u32>,
+    /// Scans the image was made from (revolutions of a `.pcap`, 1 for any
+    /// other file); 0 is read as 1.
+    pub frames: u32,
 }
 
 fn median_f32(v: &mut [f32]) -> f32 {
@@ -161,8 +199,15 @@ fn median_f32(v: &mut [f32]) -> f32 {
 }
 
 impl CellImage {
-    /// Reduces the points of one recording (any order) to a cell image.
+    /// Reduces the points of one single-scan recording (any order) to a cell
+    /// image.
     pub fn from_points(points: &[CellPoint], n_cells: usize) -> CellImage {
+        CellImage::from_frames(points, 1, n_cells)
+    }
+
+    /// Reduces the points of a recording of `frames` scans (any order) to a
+    /// cell image.
+    pub fn from_frames(points: &[CellPoint], frames: u32, n_cells: usize) -> CellImage {
         // Counting sort by cell: O(n), no allocation per cell.
         let mut start = vec![0u32; n_cells + 1];
         for p in points {
@@ -180,7 +225,10 @@ impl CellImage {
             f[*k as usize] = p.reflectivity;
             *k += 1;
         }
-        let mut img = CellImage::default();
+        let mut img = CellImage {
+            frames: frames.max(1),
+            ..CellImage::default()
+        };
         for c in 0..n_cells {
             let (a, b) = (start[c] as usize, start[c + 1] as usize);
             if a == b {
@@ -189,7 +237,7 @@ impl CellImage {
             img.cells.push(c as u32);
             img.range.push(median_f32(&mut r[a..b]));
             img.reflectivity.push(median_f32(&mut f[a..b]));
-            img.hits.push((b - a).min(u16::MAX as usize) as u16);
+            img.hits.push((b - a).min(u32::MAX as usize) as u32);
         }
         img
     }
@@ -203,8 +251,10 @@ pub struct ClearReference {
     range: Vec<f32>,
     /// Reference reflectivity per cell.
     reflectivity: Vec<f32>,
-    /// Expected returns per recording in the cell (0 when not in the reference).
+    /// Expected returns per scan in the cell (0 when not in the reference).
     hits: Vec<u16>,
+    /// Scans of each clear recording.
+    frames: Vec<u64>,
     /// Envelope of clear ranges of cells that returned at all (NaN otherwise).
     env_lo: Vec<f32>,
     env_hi: Vec<f32>,
@@ -218,10 +268,19 @@ pub struct ClearReference {
 impl ClearReference {
     /// Builds the reference from the clear recordings' images.
     ///
+    /// Each cell expects `h` returns per scan: the median over the
+    /// recordings that hit it of their hits per scan (rounded, at least 1),
+    /// so that recordings of different lengths (a `.pcap` of many
+    /// revolutions, a file of one) agree on what a scan holds. A cell is
+    /// present when its returns reach `reference_min_presence` of the
+    /// `h × scans` expected over all clear recordings.
+    ///
     /// `images` must be non-empty (the caller reports "no clear reference").
     pub fn build(grid: CellGrid, images: &[CellImage], params: &FitValidParams) -> ClearReference {
         let n_cells = grid.cells();
         let n = images.len();
+        let frames: Vec<u64> = images.iter().map(|i| i.frames.max(1) as u64).collect();
+        let all_frames: u64 = frames.iter().sum();
         // Transpose: per cell, the entries of every recording that hit it.
         let mut start = vec![0usize; n_cells + 1];
         for img in images {
@@ -237,7 +296,7 @@ impl ClearReference {
         let mut e_rec = vec![0u32; total];
         let mut e_r = vec![0f32; total];
         let mut e_f = vec![0f32; total];
-        let mut e_h = vec![0u16; total];
+        let mut e_h = vec![0u32; total];
         for (ri, img) in images.iter().enumerate() {
             for j in 0..img.cells.len() {
                 let c = img.cells[j] as usize;
@@ -260,8 +319,13 @@ impl ClearReference {
             present: Vec::new(),
             clear_recordings: n,
             loo: vec![(0, 0); n],
+            frames: frames.clone(),
         };
         let min_presence = params.reference_min_presence();
+        // A recording left out of a cell it did not hit is scored on it when
+        // the cell stays present without it; the share is judged for a
+        // recording of average length (exact when all have equal lengths).
+        let mean_frames = all_frames as f64 / n as f64;
         // Sum of h over cells that a recording *missing* from the cell would
         // still be scored on (leave-one-out presence holds without it).
         let mut missing_total = 0u64;
@@ -269,7 +333,7 @@ impl ClearReference {
         let mut order: Vec<usize> = Vec::new();
         let mut rs: Vec<f32> = Vec::new();
         let mut fs: Vec<f32> = Vec::new();
-        let mut hs: Vec<u16> = Vec::new();
+        let mut hs: Vec<u32> = Vec::new();
         let mut dev: Vec<f32> = Vec::new();
         for c in 0..n_cells {
             let (a, b) = (start[c], start[c + 1]);
@@ -292,39 +356,51 @@ impl ClearReference {
             let tol = params.pairing_tolerance(med as f64) as f32;
             let stable = mad <= tol;
             hs.clear();
-            hs.extend_from_slice(&e_h[a..b]);
+            hs.extend((a..b).map(|k| {
+                let f = frames[e_rec[k] as usize];
+                ((e_h[k] as u64 + f / 2) / f).max(1) as u32
+            }));
             hs.sort_unstable();
             let h = hs[(m - 1) / 2].max(1);
-            if stable && m as f64 >= min_presence * n as f64 {
+            let hit_sum: u64 = e_h[a..b].iter().map(|&x| x as u64).sum();
+            let share = |frames_without: f64, hits_without: f64| -> bool {
+                frames_without > 0.0 && hits_without >= min_presence * h as f64 * frames_without
+            };
+            if stable && share(all_frames as f64, hit_sum as f64) {
                 fs.clear();
                 fs.extend_from_slice(&e_f[a..b]);
                 reference.range[c] = med;
                 reference.reflectivity[c] = median_f32(&mut fs);
-                reference.hits[c] = h;
+                reference.hits[c] = h.min(u16::MAX as u32) as u16;
                 reference.present.push(c as u32);
             }
             if !stable || n < 2 {
                 continue;
             }
             // Leave-one-out: members of the cell.
-            let loo_present_member = (m - 1) as f64 >= min_presence * (n - 1) as f64 && m >= 2;
-            if loo_present_member {
+            if m >= 2 {
                 for (pos, &i) in order.iter().enumerate() {
                     let rec = e_rec[a + i] as usize;
+                    let f = frames[rec];
+                    let eh = e_h[a + i] as u64;
+                    if !share((all_frames - f) as f64, (hit_sum - eh) as f64) {
+                        continue;
+                    }
                     let med_loo = median_without(&rs, pos);
                     let tol = params.pairing_tolerance(med_loo as f64) as f32;
+                    let expected = h as u64 * f;
                     let kept = if (e_r[a + i] - med_loo).abs() <= tol {
-                        e_h[a + i].min(h) as u64
+                        eh.min(expected)
                     } else {
                         0
                     };
                     reference.loo[rec].0 += kept;
-                    reference.loo[rec].1 += h as u64;
+                    reference.loo[rec].1 += expected;
                 }
             }
-            // Non-members: the cell stays in their reference when m/(n−1)
-            // reaches the presence share; they lost all h returns.
-            if m as f64 >= min_presence * (n - 1) as f64 {
+            // Non-members: the cell stays in their reference when its share
+            // holds without them; they lost all h returns of every scan.
+            if share(all_frames as f64 - mean_frames, hit_sum as f64) {
                 missing_total += h as u64;
                 for i in 0..m {
                     member_missing_total[e_rec[a + i] as usize] += h as u64;
@@ -332,7 +408,7 @@ impl ClearReference {
             }
         }
         for (i, t) in member_missing_total.iter().enumerate() {
-            reference.loo[i].1 += missing_total - t;
+            reference.loo[i].1 += frames[i] * (missing_total - t);
         }
         reference
     }
@@ -359,7 +435,7 @@ impl ClearReference {
         self.reflectivity[cell]
     }
 
-    /// Expected returns per recording in `cell` (0 when not in the reference).
+    /// Expected returns per scan in `cell` (0 when not in the reference).
     #[inline]
     pub fn hits(&self, cell: usize) -> u16 {
         self.hits[cell]
@@ -384,8 +460,10 @@ impl ClearReference {
         &self.loo
     }
 
-    /// Revolutions per recording: the median expected hits of the reference
-    /// cells (1 for single-revolution recordings).
+    /// Revolutions per scan: the median expected hits per scan of the
+    /// reference cells (1 for `.pcap` revolutions and single-revolution files;
+    /// `k` for files that accumulate `k` revolutions, since a cell of the
+    /// measured grid holds one firing per revolution).
     pub fn revolutions(&self) -> u16 {
         let mut h: Vec<u16> = self
             .present
@@ -399,7 +477,12 @@ impl ClearReference {
         h[(h.len() - 1) / 2].max(1)
     }
 
-    /// Expected returns per recording summed over the reference.
+    /// Scans of each clear recording, in the order given to [`Self::build`].
+    pub fn frames(&self) -> &[u64] {
+        &self.frames
+    }
+
+    /// Expected returns per scan summed over the reference.
     pub fn total_hits(&self) -> u64 {
         self.present
             .iter()
@@ -437,6 +520,7 @@ mod tests {
             range: cells.iter().map(|c| c.1).collect(),
             reflectivity: cells.iter().map(|c| c.2).collect(),
             hits: vec![1; cells.len()],
+            frames: 1,
         }
     }
 
@@ -445,7 +529,12 @@ mod tests {
         let g = grid();
         assert_eq!(g.cells(), 8);
         assert_eq!(g.cell_of(0, 1.0, 0.1), Some(0));
-        assert_eq!(g.cell_of(1, -1.0, 0.1), Some(4 + 1));
+        // Cells are centred on multiples of 90°: 95.7° is in bin 1, 174.3°
+        // in bin 2 (the old grid had its edges there).
+        assert_eq!(g.cell_of(1, -0.1, 1.0), Some(4 + 1));
+        assert_eq!(g.cell_of(1, -1.0, 0.1), Some(4 + 2));
+        assert_eq!(g.ring_of(6), 1);
+        assert!((g.azimuth_deg(6) - 180.0).abs() < 1e-9);
         assert_eq!(g.cell_of(1, 0.1, -1.0), Some(4 + 3));
         assert_eq!(g.cell_of(2, 1.0, 0.0), None);
         assert_eq!(g.shifted(4, -1), 7);

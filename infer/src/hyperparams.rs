@@ -48,7 +48,7 @@ pub enum Severity {
 /// | `slope_source` | [`SlopeSource::Survival`] | which slope estimate decides vanishing | survival, quantile |
 /// | `soft_edge` | off | stochastic survival edge from the table's `survival` fit (edge width per band, dropout, residual) instead of a hard threshold | needs `survival` and every band's `edge_width` |
 /// | `near_range` | off | add ghost and ring returns from the table's laws; each replaces the return of its ray when closer | needs `ghost` or `ring` |
-/// | `near_range_count_scale` | 1 | multiplies the expected ghost/ring count per scan (the table counts per *recording*; a single revolution of a 1-minute recording is about 1/600 of it) | ≥ 0, finite |
+/// | `near_range_count_scale` | 1 | multiplies the expected ghost/ring count per scan; the table counts per revolution (`lidar.count_unit = per_revolution`, also what a table without the field meant), so 1 places one revolution's worth in each scan applied | ≥ 0, finite |
 /// | `range_noise_m` | 0 (off) | σ of Gaussian noise added to the range of kept returns | ≥ 0, finite |
 /// | `attenuate_intensity` | off | multiply kept intensities by the two-way loss exp(−2·α·r), α = ln(20)/MOR (Koschmieder) | — |
 /// | `clamp_rain_rate` | off | clamp a rain rate outside the conversion's validity into it (with a warning) instead of failing | — |
@@ -248,12 +248,27 @@ impl ApplyParams {
                 short_number(hi, Toward::Nearest)
             ));
         }
-        let bands = self.band_rules(coeffs, mor, scalars.range_scale, identity, label)?;
+        let bands = self.band_rules(
+            coeffs,
+            mor,
+            scalars.range_scale,
+            identity,
+            label,
+            &mut warnings,
+        )?;
         let soft = if self.soft_edge && !identity {
             Some(soft_edge(coeffs, w, label)?)
         } else {
             None
         };
+        if self.near_range
+            && !identity
+            && table.lidar.count_unit == murk_types::CountUnit::PerRecording
+        {
+            warnings.push(format!(
+                "{label}: the table counts near-range returns per recording (lidar.count_unit = per_recording), not per revolution: set near_range_count_scale to 1 / revolutions per recording"
+            ));
+        }
         let (ghost, ring) = if self.near_range && !identity {
             self.near_laws(coeffs, mor, label, &mut warnings)?
         } else {
@@ -387,6 +402,7 @@ impl ApplyParams {
         range_scale: f64,
         identity: bool,
         label: &str,
+        warnings: &mut Vec<String>,
     ) -> Result<Vec<BandRule>, InferError> {
         let source = match self.slope_source {
             SlopeSource::Survival => &coeffs.vanishing_slope,
@@ -408,8 +424,38 @@ impl ApplyParams {
             ));
         }
         let mut bands = Vec::with_capacity(source.len());
+        // A band with no clear return in the campaign (a sensor whose
+        // reflectivities never fall in it) has no slope to fit; it borrows
+        // the nearest band that has one, said in a warning, so that a table
+        // fitted on such a sensor applies (no point of that sensor falls in
+        // the band) and a point that does fall in it is not left untouched.
+        let empty = |b: &murk_types::SlopeBand| b.slope.is_none() && b.points == 0;
+        let borrow = |i: usize| -> Option<(usize, &murk_types::SlopeBand)> {
+            (1..source.len())
+                .flat_map(|d| [i.checked_sub(d), Some(i + d)])
+                .flatten()
+                .filter_map(|j| source.get(j).map(|b| (j, b)))
+                .find(|(_, b)| b.slope.is_some())
+        };
+        let band_name = |b: &murk_types::SlopeBand| {
+            format!(
+                "[{}, {})",
+                b.reflectivity_min,
+                b.reflectivity_max
+                    .map_or("∞".to_string(), |m| m.to_string())
+            )
+        };
         for (i, b) in source.iter().enumerate() {
-            let slope = match b.slope {
+            let borrowed = (empty(b) && !identity).then(|| borrow(i)).flatten();
+            if let Some((_, from)) = borrowed {
+                warnings.push(format!(
+                    "{field}[{i}]: the band {} had no clear return in the campaign (no slope to fit); points in it use the slope of the band {}",
+                    band_name(b),
+                    band_name(from)
+                ));
+            }
+            let b_edge_width = borrowed.map_or(b.edge_width, |(_, f)| f.edge_width);
+            let slope = match borrowed.and_then(|(_, f)| f.slope).or(b.slope) {
                 Some(s) => s,
                 None if identity => f64::NAN,
                 None => {
@@ -428,7 +474,7 @@ impl ApplyParams {
             };
             if self.soft_edge
                 && !identity
-                && b.edge_width.is_none_or(|e| !(e.is_finite() && e > 0.0))
+                && b_edge_width.is_none_or(|e| !(e.is_finite() && e > 0.0))
             {
                 return Err(missing(
                     label,
@@ -441,7 +487,7 @@ impl ApplyParams {
                 reflectivity_max: b.reflectivity_max,
                 slope,
                 vanishing_distance_m: slope * mor * range_scale,
-                edge_width: b.edge_width,
+                edge_width: b_edge_width,
             });
         }
         Ok(bands)

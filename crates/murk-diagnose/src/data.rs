@@ -14,10 +14,11 @@ use std::path::{Path, PathBuf};
 
 use murk_campaign::{Campaign, Cell};
 use murk_fit::FitValidParams;
-use murk_fit::driver::{FitInputs, RecordingInput, read_lidar};
-use murk_fit::pairing::pair_recording_detailed;
+use murk_fit::driver::{
+    FitInputs, RecordingInput, measure_geometry, read_lidar_frames, read_scans,
+};
+use murk_fit::pairing::pair_frames_detailed;
 use murk_fit::reference::{CellGrid, CellImage, CellPoint, ClearReference, cell_points};
-use murk_io::ReadOptions;
 use murk_types::{CovariateValue, LidarSpec, PointCloud, PointCovariates, WeatherClass};
 use rayon::prelude::*;
 
@@ -45,10 +46,11 @@ pub struct CellInfo {
 pub struct Unit {
     /// Reference cell.
     pub cell: u32,
-    /// Expected returns.
-    pub trials: u16,
+    /// Expected returns: the cell's returns per scan times the recording's
+    /// scans (revolutions of a `.pcap`).
+    pub trials: u32,
     /// Returns kept (paired).
-    pub kept: u16,
+    pub kept: u32,
 }
 
 /// A kept (paired) return.
@@ -97,6 +99,8 @@ pub struct ClearRec {
     pub lidar: PathBuf,
     /// Its points, calibrated reflectivity (the input of the simulations).
     pub cloud: PointCloud,
+    /// Its scans (revolutions of a `.pcap`, 1 for any other file).
+    pub frames: u32,
 }
 
 /// A campaign read for one weather.
@@ -138,12 +142,12 @@ fn read_and_pair(
     reference: &ClearReference,
     params: &FitValidParams,
 ) -> Result<PairedRecording, DiagnoseError> {
-    let (points, _) =
-        read_lidar(&r.lidar, spec, reference.grid()).map_err(|e| DiagnoseError::Read {
+    let (points, frames, _) =
+        read_lidar_frames(&r.lidar, spec, reference.grid()).map_err(|e| DiagnoseError::Read {
             path: r.lidar.clone(),
             reason: e.to_string(),
         })?;
-    let (tally, pairs) = pair_recording_detailed(reference, &points, params);
+    let (tally, pairs) = pair_frames_detailed(reference, &points, frames, params);
     Ok((points, tally, pairs))
 }
 
@@ -153,19 +157,30 @@ type PairedRecording = (
     Vec<murk_fit::pairing::Pair>,
 );
 
-/// Reads a point cloud in calibrated reflectivity.
+/// Reads a point cloud in calibrated reflectivity: the revolutions the fit
+/// pairs (a `.pcap`'s full revolutions, joined; any other file whole).
 pub fn read_calibrated(path: &Path, spec: &LidarSpec) -> Result<PointCloud, DiagnoseError> {
-    let opts = ReadOptions {
-        lidar: Some(spec.clone()),
-        intensity_scale: spec.intensity_scale,
-        ..Default::default()
-    };
-    let mut cloud = murk_io::read_cloud(path, &opts).map_err(|e| DiagnoseError::Read {
+    read_revolutions(path, spec).map(|(c, _)| c)
+}
+
+/// [`read_calibrated`] and the number of scans joined (revolutions of a
+/// `.pcap`, 1 for any other file), as murk-fit's `read_scans` reads them.
+pub fn read_revolutions(path: &Path, spec: &LidarSpec) -> Result<(PointCloud, u32), DiagnoseError> {
+    let err = |reason: String| DiagnoseError::Read {
         path: path.to_path_buf(),
-        reason: e.to_string(),
-    })?;
-    cloud.to_calibrated();
-    Ok(cloud)
+        reason,
+    };
+    let (scans, _) = read_scans(path, spec).map_err(|e| err(e.to_string()))?;
+    let mut cloud = PointCloud::default();
+    if let Some(f) = scans.first() {
+        cloud.intensity_scale = f.intensity_scale;
+    }
+    for f in &scans {
+        cloud
+            .extend_from(f)
+            .map_err(|e| err(format!("cannot join the capture's revolutions: {e}")))?;
+    }
+    Ok((cloud, scans.len().max(1) as u32))
 }
 
 /// Reads `campaign` for `weather`: the reference from every clear recording
@@ -177,7 +192,18 @@ pub fn load(
 ) -> Result<Loaded, DiagnoseError> {
     let inputs = FitInputs::from_campaign(campaign);
     let spec = inputs.lidar.clone();
-    let grid = CellGrid::new(&spec);
+    // The fit's grid: the firing geometry measured from the clear recordings.
+    let geometry = if params.declared_geometry() {
+        murk_fit::geometry::declared(&spec)
+    } else {
+        measure_geometry(&inputs)
+            .map_err(|e| DiagnoseError::Campaign {
+                weather: weather.to_string(),
+                reason: e.to_string(),
+            })?
+            .0
+    };
+    let grid = CellGrid::from_geometry(&geometry);
     let order: BTreeMap<&str, usize> = campaign
         .recordings()
         .iter()
@@ -199,33 +225,40 @@ pub fn load(
     // Each clear recording is read once: its cloud is kept for the
     // simulations, its cell points build the reference (as murk-fit's
     // `build_reference` does) and are paired for the per-cell offsets.
-    let read: Vec<Result<(PointCloud, Vec<CellPoint>), DiagnoseError>> = clear_in
+    type ClearRead = (PointCloud, Vec<CellPoint>, u32);
+    let read: Vec<Result<ClearRead, DiagnoseError>> = clear_in
         .par_iter()
         .map(|r| {
-            let cloud = read_calibrated(&r.lidar, &spec)?;
+            let (cloud, frames) = read_revolutions(&r.lidar, &spec)?;
             let points = cell_points(&grid, &cloud, &r.lidar).map_err(|e| DiagnoseError::Read {
                 path: r.lidar.clone(),
                 reason: e.to_string(),
             })?;
-            Ok((cloud, points))
+            Ok((cloud, points, frames))
         })
         .collect();
-    let (clear_clouds, clear_points): (Vec<PointCloud>, Vec<Vec<CellPoint>>) = read
-        .into_iter()
-        .collect::<Result<Vec<_>, _>>()?
-        .into_iter()
-        .unzip();
+    let mut clear_clouds = Vec::new();
+    let mut clear_points = Vec::new();
+    let mut clear_frames = Vec::new();
+    for r in read {
+        let (c, p, f) = r?;
+        clear_clouds.push(c);
+        clear_points.push(p);
+        clear_frames.push(f);
+    }
     let images: Vec<CellImage> = clear_points
         .iter()
-        .map(|p| CellImage::from_points(p, grid.cells()))
+        .zip(&clear_frames)
+        .map(|(p, &f)| CellImage::from_frames(p, f, grid.cells()))
         .collect();
     let reference = ClearReference::build(grid.clone(), &images, params);
     drop(images);
     // What pairing does to range and reflectivity in clear weather, per cell.
     let offsets: Vec<Vec<(u32, f64, f64)>> = clear_points
         .par_iter()
-        .map(|points| {
-            let (_, pairs) = pair_recording_detailed(&reference, points, params);
+        .zip(&clear_frames)
+        .map(|(points, &frames)| {
+            let (_, pairs) = pair_frames_detailed(&reference, points, frames, params);
             pairs
                 .iter()
                 .map(|p| {
@@ -250,12 +283,10 @@ pub fn load(
             e.2 += 1;
         }
     }
-    let az_bins = grid.azimuth_bins();
-    let az_res = 360.0 / az_bins as f64;
     let mut cells = vec![None; grid.cells()];
     for &c in reference.present() {
         let c = c as usize;
-        let ring = (c / az_bins) as u16;
+        let ring = grid.ring_of(c) as u16;
         cells[c] = Some(CellInfo {
             hits: reference.hits(c),
             cov: PointCovariates {
@@ -263,7 +294,7 @@ pub fn load(
                 reflectivity: reference.reflectivity(c) as f64,
                 ring,
                 elevation: spec.elevation_deg[ring as usize],
-                azimuth: ((c % az_bins) as f64 + 0.5) * az_res,
+                azimuth: grid.azimuth_deg(c),
             },
             clear_range_offset: if off[c].2 > 0 {
                 off[c].0 / off[c].2 as f64
@@ -280,8 +311,10 @@ pub fn load(
     let clear: Vec<ClearRec> = clear_in
         .iter()
         .zip(clear_clouds)
-        .map(|(r, cloud)| ClearRec {
+        .zip(clear_frames)
+        .map(|((r, cloud), frames)| ClearRec {
             cloud,
+            frames,
             id: r.id.clone(),
             order: order.get(r.id.as_str()).copied().unwrap_or(0),
             lidar: r.lidar.clone(),
@@ -321,7 +354,7 @@ pub fn load(
                 .filter(|&&c| !occluded[c as usize])
                 .map(|&c| Unit {
                     cell: c,
-                    trials: reference.hits(c as usize),
+                    trials: reference.hits(c as usize) as u32 * tally.frames,
                     kept: tally.matched[c as usize],
                 })
                 .collect();

@@ -22,7 +22,7 @@
 use std::collections::BTreeMap;
 
 use murk_fit::FitValidParams;
-use murk_fit::pairing::pair_recording;
+use murk_fit::pairing::pair_frames;
 use murk_fit::reference::cell_points;
 use murk_infer::{Applier, ApplyParams, Severity};
 use murk_types::{
@@ -271,7 +271,7 @@ fn simulate(
             path: clear_rec.lidar.clone(),
             reason: e.to_string(),
         })?;
-        let t = pair_recording(&loaded.reference, &pts, fit_params);
+        let t = pair_frames(&loaded.reference, &pts, clear_rec.frames, fit_params);
         near += (t.ghosts.len() + t.rings.len()) as f64;
         let m = SceneMetrics::compare(&measured, &xyz(&out), opts.voxel_m, opts.local_box.as_ref());
         acc.voxel_global_difference += m.voxel_global_difference;

@@ -62,6 +62,73 @@ pub struct TableLidar {
     /// Range-scale coefficient of the fitted sensor: vanishing distance =
     /// slope × MOR × range_scale.
     pub range_scale: f64,
+    /// The firing geometry the fit paired on: measured from the clear
+    /// recordings (or the declared one when it could not be measured).
+    /// Absent in tables written before it was measured.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub geometry: Option<SensorGeometry>,
+    /// What the recordings contradict in `campaign.toml` (azimuth step, ring
+    /// elevations, ring count), each with both values.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub warnings: Vec<String>,
+    /// Unit of every near-range count in the table (`points_per_scan` and
+    /// the count laws). A table without it counted per recording of one
+    /// revolution, which is the same as per revolution.
+    #[serde(default)]
+    pub count_unit: CountUnit,
+}
+
+/// Unit of the near-range counts of a table.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CountUnit {
+    /// Returns per revolution (per scan) of the sensor.
+    #[default]
+    PerRevolution,
+    /// Returns per recording, whatever its length.
+    PerRecording,
+}
+
+/// The firing geometry of a LiDAR as the fit measured it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SensorGeometry {
+    /// `measured` (from the clear recordings) or `declared` (campaign.toml,
+    /// when the recordings could not tell).
+    pub source: String,
+    /// Clear recordings measured.
+    pub recordings: u32,
+    /// Scans (revolutions of a `.pcap`, whole files otherwise) measured.
+    pub frames: u32,
+    /// Median azimuth step of the measured rings, degrees.
+    pub azimuth_step_deg: f64,
+    /// `azimuth_resolution_deg` of campaign.toml.
+    pub declared_azimuth_step_deg: f64,
+    /// Per ring.
+    pub rings: Vec<RingGeometry>,
+}
+
+/// The measured firing grid of one ring.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RingGeometry {
+    /// Ring number.
+    pub ring: u16,
+    /// Azimuth step between consecutive firings, degrees (360 / bins).
+    pub azimuth_step_deg: f64,
+    /// Azimuth of the firing grid modulo the step, degrees in `[0, step)`:
+    /// pairing cells are centred on `phase + k·step`.
+    pub azimuth_phase_deg: f64,
+    /// Resultant length of the firings' phases (1: every revolution fires at
+    /// the same azimuths, phase-locked; near 0: free-running).
+    pub phase_locking: f64,
+    /// Median elevation of the ring's returns, degrees (null without returns).
+    pub elevation_deg: Option<f64>,
+    /// The elevation campaign.toml declares for the ring.
+    pub declared_elevation_deg: Option<f64>,
+    /// Returns the ring's step was measured from.
+    pub returns: u64,
+    /// False when the ring had too few returns and took the other rings'
+    /// step (or the declared one).
+    pub measured: bool,
 }
 
 /// Everything fitted for one degraded weather.
@@ -250,8 +317,12 @@ pub struct NoiseLaw {
     pub distance_m: Gaussian,
     /// Law of the calibrated reflectivity.
     pub reflectivity: Gaussian,
-    /// Mean number per recording (scan).
+    /// Mean number per scan, in the table's `lidar.count_unit` (per
+    /// revolution since that field exists).
     pub points_per_scan: f64,
+    /// Mean number per recording (a recording may hold many revolutions).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub points_per_recording: Option<f64>,
     /// Returns the laws were fitted on.
     #[serde(default)]
     pub points: u64,
@@ -710,6 +781,7 @@ mod tests {
                 std_std_error: None,
             },
             points_per_scan: 41.0,
+            points_per_recording: Some(41.0),
             points: 410,
             visible_fraction: Some(0.9),
             count_law: Some(CountLaw::Power {
@@ -761,6 +833,9 @@ mod tests {
             lidar: TableLidar {
                 model: "VLP16".into(),
                 range_scale: 1.0,
+                geometry: None,
+                warnings: vec![],
+                count_unit: CountUnit::PerRevolution,
             },
             weathers: BTreeMap::from([(WeatherClass::Fog, fog)]),
             absent: BTreeMap::from([(WeatherClass::Snow, "no recording".into())]),

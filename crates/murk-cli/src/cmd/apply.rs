@@ -68,8 +68,9 @@ pub struct Args {
     /// Add ghost and ring returns from the table's laws.
     #[arg(long)]
     pub near_range: bool,
-    /// Multiply the table's ghost/ring count per scan (its counts are per
-    /// recording; one revolution of a 1-minute recording is ~1/600).
+    /// Multiply the table's ghost/ring count per scan. The table counts per
+    /// revolution (`lidar.count_unit`), so 1 gives each input scan one
+    /// revolution's worth; give N for an input that accumulates N revolutions.
     #[arg(long, default_value_t = 1.0, requires = "near_range")]
     pub near_range_count_scale: f64,
     /// σ (metres) of Gaussian range noise on kept returns.
