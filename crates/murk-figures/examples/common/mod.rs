@@ -52,6 +52,7 @@ fn noise(distance: Gaussian, reflectivity: Gaussian) -> NoiseLaw {
         distance_m: distance,
         reflectivity,
         points_per_scan: 12.0,
+        points_per_recording: None,
         points: 400,
         visible_fraction: None,
         count_law: None,
