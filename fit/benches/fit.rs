@@ -17,7 +17,7 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use murk_campaign::Campaign;
 use murk_fit::EdgeShape;
 use murk_fit::FitParams;
-use murk_fit::survival::{Obs, SurvivalOptions, fit_survival};
+use murk_fit::{Obs, SurvivalOptions, fit_survival};
 use murk_fixtures::{Generator, GeneratorConfig, OutputOptions, Preset};
 
 fn campaigns(c: &mut Criterion) {

@@ -169,7 +169,7 @@ pub fn read_file(path: &Path) -> Result<Vec<u8>, FitError> {
 }
 
 /// Reads one LiDAR recording as scans: one per revolution of a `.pcap`
-/// (partial first and last revolutions left out, see [`full_revolutions`]), the
+/// (partial first and last revolutions left out, see the private `full_revolutions`), the
 /// whole file for every other format; calibrated intensity. Returns the scans
 /// and the file's SHA-256.
 pub fn read_scans(path: &Path, spec: &LidarSpec) -> Result<(Vec<PointCloud>, String), FitError> {
@@ -239,11 +239,10 @@ pub fn read_lidar(
     Ok((points, digest))
 }
 
-/// The firing geometry measured from the first
-/// [`MAX_RECORDINGS`](crate::geometry::MAX_RECORDINGS) clear recordings of
-/// `inputs` (up to
-/// [`MAX_FRAMES_PER_RECORDING`](crate::geometry::MAX_FRAMES_PER_RECORDING)
-/// scans each), and what it contradicts in the declared LiDAR.
+/// The firing geometry measured from the first 8 clear recordings of
+/// `inputs` (up to 20 scans each; `geometry::MAX_RECORDINGS` and
+/// `MAX_FRAMES_PER_RECORDING`), and what it contradicts in the declared
+/// LiDAR.
 pub fn measure_geometry(inputs: &FitInputs) -> Result<(SensorGeometry, Vec<String>), FitError> {
     let clear: Vec<&RecordingInput> = inputs
         .recordings

@@ -61,7 +61,7 @@ impl Band {
 /// | `ghost_range_m` | [3, 10) | range window of *ghost* returns | ring hi ≤ lo < hi |
 /// | `pairing_tolerance_m` | 0.5 | absolute range tolerance for a degraded return to pair with the clear one | ≥ 0 |
 /// | `pairing_tolerance_rel` | 0.02 | relative range tolerance (the larger of the two applies) | ≥ 0 |
-/// | `declared_geometry` | false | pair on campaign.toml's azimuth grid instead of the firing grid measured from the clear recordings (see [`crate::geometry`]); disagreements are warned either way | |
+/// | `declared_geometry` | false | pair on campaign.toml's azimuth grid instead of the firing grid measured from the clear recordings (see [`observe`](crate::observe)); disagreements are warned either way | |
 /// | `azimuth_neighbours` | 1 | azimuth bins either side searched when the own cell does not pair | 0–4 |
 /// | `reference_min_presence` | 0.5 | share of clear recordings a cell must return in to enter the reference | (0, 1] |
 /// | `min_points_per_bin` | 50 | *no change* returns a MOR bin needs for its quantile | ≥ 1 |

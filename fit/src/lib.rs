@@ -6,12 +6,12 @@
 //! (`weather-noise-coefficients/1`) that `murk apply` uses:
 //!
 //! - **vanishing slopes** per weather and reflectivity band, as the maximum
-//!   likelihood edge of a survival boundary ([`survival`]) — the value
+//!   likelihood edge of a survival boundary ([`fit_survival`]) — the value
 //!   appliers use — with the seed's quantile estimate beside it
-//!   ([`quantile_slope`]), per-MOR-bin quantiles, censored bins and reasons;
+//!   (module `quantile_slope`), per-MOR-bin quantiles, censored bins and reasons;
 //! - the **rain conversion** `MOR = a·R + b` and its validity range;
-//! - **ghost and ring** laws (truncated-normal maximum likelihood, see
-//!   [`stats::truncnorm`]) and their **count per scan** as a power law of MOR;
+//! - **ghost and ring** laws (truncated-normal maximum likelihood, module
+//!   `stats::truncnorm`) and their **count per scan** as a power law of MOR;
 //! - **no-change rates** for LiDAR and radar per weather with bootstrap
 //!   uncertainties;
 //! - **provenance**: tool, every parameter, SHA-256 of every input file.
@@ -20,11 +20,17 @@
 //! defaults) → [`FitParams::check`] → [`FitValidParams::fit`] → a
 //! [`FittedTable`] (the table and the data of its figures).
 //!
-//! **Architecture invariant:** statistics do no I/O. [`reference`](mod@reference),
-//! [`pairing`], [`survival`], [`quantile_slope`], [`radar`] and [`stats`] work
-//! on in-memory values and are unit-tested against known answers; only
-//! [`driver`] reads files (through `murk-io`) and streams recordings, keeping
+//! **Architecture invariant:** statistics do no I/O. The private modules
+//! `reference`, `pairing`, `survival`, `quantile_slope`, `radar` and `stats`
+//! work on in-memory values and are unit-tested against known answers; only
+//! `driver` reads files (through `murk-io`) and streams recordings, keeping
 //! per-cell and per-bin statistics, never the points of a campaign.
+//!
+//! **One door.** Besides the fit itself, the crate's public surface is
+//! [`observe`]: the campaign's inputs, the clear reference, the measured
+//! firing geometry and the pairing of one recording, exactly as the fit
+//! sees them. `murk-diagnose` uses that module and nothing else of the
+//! fit's internals.
 //!
 //! ```
 //! use murk_fit::FitParams;
@@ -77,16 +83,17 @@ mod algorithm;
 mod assemble;
 pub mod diagnostics;
 #[allow(clippy::disallowed_methods, clippy::disallowed_types)]
-pub mod driver;
+mod driver;
 mod error;
-pub mod geometry;
+mod geometry;
 mod hyperparams;
-pub mod pairing;
-pub mod quantile_slope;
-pub mod radar;
-pub mod reference;
-pub mod stats;
-pub mod survival;
+pub mod observe;
+mod pairing;
+mod quantile_slope;
+mod radar;
+mod reference;
+mod stats;
+mod survival;
 
 pub use accumulate::{RecordingRow, WeatherAcc};
 pub use algorithm::{FittedTable, TOOL, write_atomic};
@@ -97,3 +104,6 @@ pub use diagnostics::{
 pub use driver::{FitInputs, RecordingInput};
 pub use error::FitError;
 pub use hyperparams::{Band, EdgeShape, FitParams, FitValidParams, parse_edge};
+/// The maximum-likelihood survival fit on its own (a benchmark target and a
+/// building block for other estimators; `fit` calls it per band).
+pub use survival::{Obs, SurvivalOptions, fit_survival};

@@ -53,7 +53,8 @@ impl RecordingTally {
 }
 
 /// Pairs the returns of one degraded (or clear) single-scan recording with
-/// `reference`.
+/// `reference` (the tests' shorthand for [`pair_frames`] on one scan).
+#[cfg(test)]
 pub fn pair_recording(
     reference: &ClearReference,
     points: &[CellPoint],
@@ -86,6 +87,7 @@ pub struct Pair {
 
 /// [`pair_recording`], also listing every pair (for per-return residuals of
 /// range and reflectivity).
+#[cfg(test)]
 pub fn pair_recording_detailed(
     reference: &ClearReference,
     points: &[CellPoint],

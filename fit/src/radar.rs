@@ -180,16 +180,6 @@ impl RadarReference {
             .count() as u64;
         Ok((paired, total))
     }
-
-    /// Reference points.
-    pub fn len(&self) -> usize {
-        self.points.len()
-    }
-
-    /// True when the reference is empty.
-    pub fn is_empty(&self) -> bool {
-        self.points.is_empty()
-    }
 }
 
 #[cfg(test)]
@@ -227,7 +217,7 @@ mod tests {
         let clear: Vec<Detections> = (0..12).map(|_| recording(0.97, &mut rng)).collect();
         let (r, base) = RadarReference::build(&clear, 0.5, 0.5).unwrap();
         // The 100 structures, none of the noise.
-        assert_eq!(r.len(), 100);
+        assert_eq!(r.points.len(), 100);
         let (k, t): (u64, u64) = base.iter().fold((0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
         // 1 200 trials at p = 0.97: SE 0.005; allow 0.02.
         assert!((k as f64 / t as f64 - 0.97).abs() < 0.02, "{k}/{t}");

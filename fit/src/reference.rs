@@ -28,7 +28,7 @@ use crate::{FitError, FitValidParams};
 
 /// The (ring, azimuth bin) grid of a LiDAR: per ring, `bins` cells of
 /// `360 / bins` degrees centred on `phase + k · width` (the ring's firings,
-/// see [`crate::geometry`]).
+/// see [`observe::measure_geometry`](crate::observe::measure_geometry)).
 #[derive(Debug, Clone, PartialEq)]
 pub struct CellGrid {
     /// Per ring: (first cell, bins, width in degrees, phase in degrees).

@@ -1,7 +1,7 @@
 //! Reading a campaign for diagnosis: the clear reference, and every degraded
 //! recording of one weather reduced to what it shows per reference cell.
 //!
-//! Pairing is murk-fit's own ([`murk_fit::pairing`]), so the diagnosis sees
+//! Pairing is murk-fit's own ([`murk_fit::observe`]), so the diagnosis sees
 //! exactly the classes the fit saw: per reference cell, how many of its
 //! expected returns were kept (*no change*); for each kept return, its
 //! measured range and reflectivity; per recording, the number of ghost and
@@ -14,11 +14,11 @@ use std::path::{Path, PathBuf};
 
 use murk_campaign::{Campaign, Cell};
 use murk_fit::FitValidParams;
-use murk_fit::driver::{
+use murk_fit::observe::pair_frames_detailed;
+use murk_fit::observe::{CellGrid, CellImage, CellPoint, ClearReference, cell_points};
+use murk_fit::observe::{
     FitInputs, RecordingInput, measure_geometry, read_lidar_frames, read_scans,
 };
-use murk_fit::pairing::pair_frames_detailed;
-use murk_fit::reference::{CellGrid, CellImage, CellPoint, ClearReference, cell_points};
 use murk_types::{CovariateValue, LidarSpec, PointCloud, PointCovariates, WeatherClass};
 use rayon::prelude::*;
 
@@ -152,9 +152,9 @@ fn read_and_pair(
 }
 
 type PairedRecording = (
-    Vec<murk_fit::reference::CellPoint>,
-    murk_fit::pairing::RecordingTally,
-    Vec<murk_fit::pairing::Pair>,
+    Vec<murk_fit::observe::CellPoint>,
+    murk_fit::observe::RecordingTally,
+    Vec<murk_fit::observe::Pair>,
 );
 
 /// Reads a point cloud in calibrated reflectivity: the revolutions the fit
@@ -194,7 +194,7 @@ pub fn load(
     let spec = inputs.lidar.clone();
     // The fit's grid: the firing geometry measured from the clear recordings.
     let geometry = if params.declared_geometry() {
-        murk_fit::geometry::declared(&spec)
+        murk_fit::observe::declared(&spec)
     } else {
         measure_geometry(&inputs)
             .map_err(|e| DiagnoseError::Campaign {

@@ -22,8 +22,8 @@
 use std::collections::BTreeMap;
 
 use murk_fit::FitValidParams;
-use murk_fit::pairing::pair_frames;
-use murk_fit::reference::cell_points;
+use murk_fit::observe::cell_points;
+use murk_fit::observe::pair_frames;
 use murk_infer::{Applier, ApplyParams, Severity};
 use murk_types::{
     CoefficientTable, CovariateValue, ExtensionObservable, PointCloud, PointCovariates,

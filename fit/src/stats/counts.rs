@@ -24,6 +24,7 @@ pub struct PowerLaw {
 
 impl PowerLaw {
     /// Expected count at `mor`.
+    #[cfg(test)]
     pub fn expected(&self, mor: f64) -> f64 {
         self.n_ref * (self.mor_ref / mor).powf(self.exponent)
     }
@@ -39,6 +40,7 @@ pub enum CountLawFailure {
 }
 
 /// Poisson ML of the power law on `(mor, count)` pairs.
+#[cfg(test)]
 pub fn fit_power_law(data: &[(f64, u64)], mor_ref: f64) -> Result<PowerLaw, CountLawFailure> {
     let exposed: Vec<(f64, u64, f64)> = data.iter().map(|&(m, c)| (m, c, 1.0)).collect();
     fit_power_law_exposed(&exposed, mor_ref)

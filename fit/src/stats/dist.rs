@@ -2,7 +2,7 @@
 //! `murk_types::EdgeShape`), on `libm` so that results do not depend on
 //! the platform's C library.
 
-use std::f64::consts::{PI, SQRT_2};
+use std::f64::consts::SQRT_2;
 
 /// Standard normal CDF Φ(z).
 #[inline]
@@ -11,15 +11,10 @@ pub fn normal_cdf(z: f64) -> f64 {
 }
 
 /// Standard normal survival 1 − Φ(z), accurate in the upper tail.
+#[cfg(test)]
 #[inline]
 pub fn normal_sf(z: f64) -> f64 {
     0.5 * libm::erfc(z / SQRT_2)
-}
-
-/// ln φ(z) of the standard normal density.
-#[inline]
-pub fn normal_ln_pdf(z: f64) -> f64 {
-    -0.5 * z * z - 0.5 * (2.0 * PI).ln()
 }
 
 /// The logistic function 1 / (1 + e^(−x)).

@@ -7,7 +7,7 @@
 //! (per ring firing step, phase and elevation, and what contradicts
 //! campaign.toml; `lidar_geometry` and `lidar_warnings` in the JSON) as a
 //! table or as JSON. Measuring reads point clouds, which `murk-campaign`
-//! never does, so the CLI calls `murk_fit::driver::measure_geometry`; a
+//! never does, so the CLI calls `murk_fit::observe::measure_geometry`; a
 //! campaign whose clouds cannot be read still gets its summary, with the
 //! reason in place of the geometry. With `--figures` it writes
 //! `mor-histogram.png` and `mor-histogram.svg` (MOR of the kept recordings of
@@ -63,7 +63,7 @@ fn summary(args: SummaryArgs) -> anyhow::Result<()> {
     let selection = campaign.select();
     let summary = selection.summary();
     let inputs = murk_fit::FitInputs::from_campaign(&campaign);
-    let geometry = murk_fit::driver::measure_geometry(&inputs);
+    let geometry = murk_fit::observe::measure_geometry(&inputs);
     if args.json {
         let mut v = serde_json::to_value(summary)?;
         if let Some(o) = v.as_object_mut() {
