@@ -222,6 +222,10 @@ pub fn fit_term_with_edge(
 }
 
 /// Per-bin survival factors (`None`: too few returns), the pooled factor,
+/// and the soft edge re-fitted with them.
+type SurvivalFit = (Vec<Option<f64>>, f64, Option<EdgeRefit>);
+
+/// Per-bin survival factors (`None`: too few returns), the pooled factor,
 /// and the soft edge re-fitted with them when `refit_edge` (and the table
 /// has a soft edge).
 fn fit_survival(
@@ -231,7 +235,7 @@ fn fit_survival(
     covariate: &str,
     binning: &Binning,
     refit_edge: bool,
-) -> Result<(Vec<Option<f64>>, f64, Option<EdgeRefit>), DiagnoseError> {
+) -> Result<SurvivalFit, DiagnoseError> {
     let nb = binning.len();
     let cell = |c: u32| loaded.cells[c as usize].expect("reference cell");
     // (bin, applier index, r, ρ, kept, trials, factor of the terms the table
