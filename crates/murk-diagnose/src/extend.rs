@@ -381,7 +381,8 @@ mod tests {
 
     #[test]
     fn golden_finds_a_minimum() {
+        // 34 steps shrink the bracket of width 5 to 4e−7.
         let x = golden(|x| (x - 0.7).powi(2), -2.0, 3.0);
-        assert!((x - 0.7).abs() < 1e-9);
+        assert!((x - 0.7).abs() < 1e-6, "{x}");
     }
 }
