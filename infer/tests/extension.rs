@@ -163,3 +163,80 @@ fn soft_edge_with_terms_is_the_same_for_any_thread_count() {
     assert_eq!(one, run(3));
     assert!(one.len() > 1000 && one.len() < scan.len());
 }
+
+/// Several terms on one observable (what `murk diagnose`'s stagewise
+/// extension writes): survival factors multiply, range biases add, a
+/// scan-level term combines with a point-level one on the same points.
+#[test]
+fn several_terms_on_one_observable_combine() {
+    let mut wind = term(
+        ExtensionObservable::Survival,
+        "Wind speed (m/s)",
+        vec![5.0],
+        vec![1.0, 0.5],
+    );
+    wind.default = 1.0;
+    let t = table(vec![
+        // Ground rings (elevation < −4°): distance × 0.8.
+        term(
+            ExtensionObservable::Survival,
+            "elevation",
+            vec![-4.0],
+            vec![0.8, 1.0],
+        ),
+        // Windy scans: distance × 0.5.
+        wind,
+        // Range: +0.25 m beyond 20 m, +0.5 m everywhere from a second term.
+        term(
+            ExtensionObservable::Range,
+            "range",
+            vec![20.0],
+            vec![0.0, 0.25],
+        ),
+        term(ExtensionObservable::Range, "ring", vec![], vec![0.5]),
+    ]);
+    // MOR 100: bright returns vanish beyond 40 m.
+    let mut scan = PointCloud::with_capacity(3);
+    scan.push(35.0, 0.0, 0.0, 50.0, 0); // level, 35 m
+    scan.push(15.0, 0.0, -3.0, 50.0, 1); // −11.3°, 15.3 m
+    scan.push(25.0, 0.0, 0.0, 50.0, 2); // level, 25 m
+    let calm = ApplyParams::new(WeatherClass::Fog, Severity::Mor(100.0))
+        .covariate("Wind speed (m/s)", CovariateValue::Number(2.0))
+        .build(&t)
+        .unwrap();
+    // Calm: ground 15.3 m < 32 m kept; all kept; biases 0.25 + 0.5 beyond
+    // 20 m, 0.5 below.
+    let (out, _) = calm.apply(&scan, "s").unwrap();
+    assert_eq!(out.ring, vec![0, 1, 2]);
+    assert!((out.x[0] - 35.75).abs() < 1e-4, "{}", out.x[0]);
+    let r1 = (out.x[1].powi(2) + out.z[1].powi(2)).sqrt();
+    let r1_in = (15.0f32.powi(2) + 9.0).sqrt();
+    assert!((r1 - (r1_in + 0.5)).abs() < 1e-4, "{r1}");
+    assert!((out.x[2] - 25.75).abs() < 1e-4, "{}", out.x[2]);
+    // Windy: distance 40 × 0.5 = 20 m (level), 40 × 0.5 × 0.8 = 16 m
+    // (ground): the 35 m and 25 m returns vanish, the 15.3 m ground return
+    // stays.
+    let windy = ApplyParams::new(WeatherClass::Fog, Severity::Mor(100.0))
+        .covariate("Wind speed (m/s)", CovariateValue::Number(8.0))
+        .build(&t)
+        .unwrap();
+    assert_eq!(windy.apply(&scan, "s").unwrap().0.ring, vec![1]);
+    // A third survival term (× 0.9 everywhere) makes the ground product
+    // 0.8 · 0.5 · 0.9 = 0.36: 14.4 m < 15.3 m, and it vanishes as well.
+    let mut t3 = t.clone();
+    t3.weathers
+        .get_mut(&WeatherClass::Fog)
+        .unwrap()
+        .extensions
+        .push(term(
+            ExtensionObservable::Survival,
+            "ring",
+            vec![],
+            vec![0.9],
+        ));
+    let windy3 = ApplyParams::new(WeatherClass::Fog, Severity::Mor(100.0))
+        .covariate("Wind speed (m/s)", CovariateValue::Number(8.0))
+        .build(&t3)
+        .unwrap();
+    assert!(windy3.apply(&scan, "s").unwrap().0.is_empty());
+}

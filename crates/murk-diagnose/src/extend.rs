@@ -13,10 +13,16 @@
 //!   reflectivity;
 //! - `count`: `Σ(N_obs + ½) / Σ(N_sim + ½)` over the bin's recordings.
 //!
+//! Every term is fitted on top of the terms the table already has (the
+//! stagewise loop adds one at a time): survival factors multiply theirs,
+//! and the other observables' residuals already have theirs removed.
+//!
 //! Bins with too little data (fewer than [`MIN_TRIALS`] returns, or no
 //! recording) take the pooled value, which is also the term's default.
 
 use std::collections::BTreeMap;
+
+use serde::Serialize;
 
 use murk_types::{
     CoefficientTable, CovariateValue, ExtensionFunction, ExtensionObservable, ModelExtension,
@@ -25,7 +31,7 @@ use murk_types::{
 use crate::DiagnoseError;
 use crate::attribution::Binning;
 use crate::data::Loaded;
-use crate::evaluate::{P_FLOOR, RecEval, applier};
+use crate::evaluate::{P_FLOOR, RecEval, applier, extension_value};
 
 /// Fewest returns for a bin of its own.
 pub const MIN_TRIALS: f64 = 50.0;
@@ -43,12 +49,16 @@ fn bin_of(
     }
 }
 
+/// Golden-section steps: the bracket shrinks by 0.618 per step (to 1e−7 of
+/// its width).
+const GOLDEN_STEPS: usize = 34;
+
 fn golden(mut f: impl FnMut(f64) -> f64, mut a: f64, mut b: f64) -> f64 {
     let g = (5f64.sqrt() - 1.0) / 2.0;
     let mut c = b - g * (b - a);
     let mut d = a + g * (b - a);
     let (mut fc, mut fd) = (f(c), f(d));
-    for _ in 0..60 {
+    for _ in 0..GOLDEN_STEPS {
         if fc < fd {
             b = d;
             d = c;
@@ -76,54 +86,64 @@ pub fn fit_term(
     covariate: &str,
     binning: &Binning,
 ) -> Result<ModelExtension, DiagnoseError> {
-    let nb = binning.len();
-    let cell = |c: u32| loaded.cells[c as usize].expect("reference cell");
-    let (values, default): (Vec<Option<f64>>, f64) = match observable {
-        ExtensionObservable::Survival => {
-            // (applier index, r, ρ, kept, trials) per bin.
-            type Item = (usize, f64, f64, f64, f64);
-            let mut appliers = Vec::with_capacity(evals.len());
-            let mut items: Vec<Vec<Item>> = vec![Vec::new(); nb];
-            for e in evals {
-                let rec = &loaded.recs[e.rec];
-                appliers.push(applier(table, loaded, rec, false, 0)?);
-                let a = appliers.len() - 1;
-                for u in &rec.units {
-                    let c = cell(u.cell);
-                    if let Some(b) = bin_of(binning, covariate, &c.cov, &rec.scan) {
-                        items[b].push((
-                            a,
-                            c.cov.range,
-                            c.cov.reflectivity,
-                            u.kept as f64,
-                            u.trials as f64,
-                        ));
+    fit_term_with_edge(loaded, table, evals, observable, covariate, binning, false).map(|t| t.term)
+}
+
+/// A fitted term, and for survival the factor on the soft edge's widths
+/// re-fitted with it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FittedTerm {
+    /// The term.
+    pub term: ModelExtension,
+    /// The soft edge re-fitted with a survival term (when asked and the
+    /// table has one): the baseline's edge was fitted on recordings that
+    /// hold the effect the term now models, which distorts its width,
+    /// dropout and residual; re-fitting them with the term removes that
+    /// echo (a survival misfit along range, and azimuth on a static site).
+    pub edge: Option<EdgeRefit>,
+}
+
+impl FittedTerm {
+    /// `table` with the term added (and the edge widths scaled) for
+    /// `weather`.
+    pub fn apply_to(&self, table: &mut CoefficientTable, weather: murk_types::WeatherClass) {
+        if let Some(w) = table.weathers.get_mut(&weather) {
+            w.extensions.push(self.term.clone());
+            if let Some(r) = self.edge {
+                for b in w.vanishing_slope.iter_mut() {
+                    if let Some(e) = b.edge_width.as_mut() {
+                        *e *= r.width_factor;
                     }
                 }
+                if let Some(s) = w.survival.as_mut() {
+                    s.dropout = r.dropout;
+                    s.residual = r.residual;
+                }
             }
-            let ml = |its: &[&Item]| -> f64 {
-                let nll = |lf: f64| -> f64 {
-                    let f = lf.exp();
-                    its.iter()
-                        .map(|&&(a, r, rho, k, n)| {
-                            let p = appliers[a]
-                                .survival_probability(r, rho, f, false)
-                                .clamp(P_FLOOR, 1.0 - P_FLOOR);
-                            -(k * p.ln() + (n - k) * (1.0 - p).ln())
-                        })
-                        .sum()
-                };
-                golden(nll, 0.2f64.ln(), 5f64.ln()).exp()
-            };
-            let all: Vec<&Item> = items.iter().flatten().collect();
-            let pooled = ml(&all);
-            let v = items
-                .iter()
-                .map(|its| {
-                    let n: f64 = its.iter().map(|i| i.4).sum();
-                    (n >= MIN_TRIALS).then(|| ml(&its.iter().collect::<Vec<_>>()))
-                })
-                .collect();
+        }
+    }
+}
+
+/// [`fit_term`], re-fitting the soft edge's width with a survival term when
+/// `refit_edge` is true (coordinate descent: the bins' factors, then one
+/// width factor over every return, twice).
+pub fn fit_term_with_edge(
+    loaded: &Loaded,
+    table: &CoefficientTable,
+    evals: &[RecEval],
+    observable: ExtensionObservable,
+    covariate: &str,
+    binning: &Binning,
+    refit_edge: bool,
+) -> Result<FittedTerm, DiagnoseError> {
+    let nb = binning.len();
+    let cell = |c: u32| loaded.cells[c as usize].expect("reference cell");
+    let mut edge = None;
+    let (values, default): (Vec<Option<f64>>, f64) = match observable {
+        ExtensionObservable::Survival => {
+            let (v, pooled, e) =
+                fit_survival(loaded, table, evals, covariate, binning, refit_edge)?;
+            edge = e;
             (v, pooled)
         }
         ExtensionObservable::Range | ExtensionObservable::Intensity => {
@@ -198,16 +218,171 @@ pub fn fit_term(
     };
     term.check()
         .map_err(|r| DiagnoseError::Table(format!("fitted term is invalid: {r}")))?;
-    Ok(term)
+    Ok(FittedTerm { term, edge })
 }
 
+/// Per-bin survival factors (`None`: too few returns), the pooled factor,
+/// and the soft edge re-fitted with them.
+type SurvivalFit = (Vec<Option<f64>>, f64, Option<EdgeRefit>);
+
+/// Per-bin survival factors (`None`: too few returns), the pooled factor,
+/// and the soft edge re-fitted with them when `refit_edge` (and the table
+/// has a soft edge).
+fn fit_survival(
+    loaded: &Loaded,
+    table: &CoefficientTable,
+    evals: &[RecEval],
+    covariate: &str,
+    binning: &Binning,
+    refit_edge: bool,
+) -> Result<SurvivalFit, DiagnoseError> {
+    let nb = binning.len();
+    let cell = |c: u32| loaded.cells[c as usize].expect("reference cell");
+    // (bin, applier index, r, ρ, kept, trials, factor of the terms the table
+    // already has), in recording order.
+    type Item = (usize, usize, f64, f64, f64, f64, f64);
+    let mut appliers = Vec::with_capacity(evals.len());
+    let mut items: Vec<Item> = Vec::new();
+    for e in evals {
+        let rec = &loaded.recs[e.rec];
+        appliers.push(applier(table, loaded, rec, false, 0)?);
+        let a = appliers.len() - 1;
+        for u in &rec.units {
+            let c = cell(u.cell);
+            if let Some(b) = bin_of(binning, covariate, &c.cov, &rec.scan) {
+                let base = extension_value(
+                    table,
+                    loaded,
+                    ExtensionObservable::Survival,
+                    &c.cov,
+                    &rec.scan,
+                    rec.mor,
+                );
+                items.push((
+                    b,
+                    a,
+                    c.cov.range,
+                    c.cov.reflectivity,
+                    u.kept as f64,
+                    u.trials as f64,
+                    base,
+                ));
+            }
+        }
+    }
+    let soft = crate::evaluate::has_soft_edge(table, loaded);
+    let (eps0, pi0) = table
+        .weathers
+        .get(&loaded.weather)
+        .and_then(|w| w.survival.as_ref())
+        .map_or((0.0, 0.0), |s| (s.dropout, s.residual));
+    // Keep probability with distance factor f and the edge `e`: the width
+    // factor m through the applier's z at r' = fD + (r − fD)/m, then the
+    // edge's dropout and residual swapped for e's.
+    let prob = |it: &Item, f: f64, e: &EdgeRefit| -> f64 {
+        let &(_, a, r, rho, _, _, base) = it;
+        let ap = &appliers[a];
+        let f = base * f;
+        let m = e.width_factor;
+        let r = if m == 1.0 {
+            r
+        } else {
+            let d = ap.vanishing_distance_m(rho) * f;
+            d + (r - d) / m
+        };
+        let p = ap.survival_probability(r, rho, f, false);
+        let p = if soft && (e.dropout != eps0 || e.residual != pi0) {
+            let sf = (p - pi0) / (1.0 - eps0 - pi0);
+            e.residual + (1.0 - e.dropout - e.residual) * sf
+        } else {
+            p
+        };
+        p.clamp(P_FLOOR, 1.0 - P_FLOOR)
+    };
+    let nll_item = |it: &Item, f: f64, e: &EdgeRefit| -> f64 {
+        let p = prob(it, f, e);
+        -(it.4 * p.ln() + (it.5 - it.4) * (1.0 - p).ln())
+    };
+    // Σ over `its` in fixed chunks (the same sum on any thread count).
+    let sum = |its: &[Item], g: &(dyn Fn(&Item) -> f64 + Sync)| -> f64 {
+        use rayon::prelude::*;
+        its.par_chunks(8192)
+            .map(|c| c.iter().map(g).sum::<f64>())
+            .collect::<Vec<f64>>()
+            .iter()
+            .sum()
+    };
+    let mut by_bin: Vec<Vec<Item>> = vec![Vec::new(); nb];
+    for it in &items {
+        by_bin[it.0].push(*it);
+    }
+    let factors = |e: &EdgeRefit| -> (Vec<Option<f64>>, f64) {
+        let ml = |its: &[Item]| -> f64 {
+            golden(
+                |lf| sum(its, &|it| nll_item(it, lf.exp(), e)),
+                0.2f64.ln(),
+                5f64.ln(),
+            )
+            .exp()
+        };
+        let pooled = ml(&items);
+        let v = by_bin
+            .iter()
+            .map(|its| {
+                let n: f64 = its.iter().map(|i| i.5).sum();
+                (n >= MIN_TRIALS).then(|| ml(its))
+            })
+            .collect();
+        (v, pooled)
+    };
+    let mut e = EdgeRefit {
+        width_factor: 1.0,
+        dropout: eps0,
+        residual: pi0,
+    };
+    let (mut v, mut pooled) = factors(&e);
+    if !refit_edge || !soft {
+        return Ok((v, pooled, None));
+    }
+    for _ in 0..2 {
+        let fs: Vec<f64> = v.iter().map(|x| x.unwrap_or(pooled)).collect();
+        let total = |e: &EdgeRefit| sum(&items, &|it| nll_item(it, fs[it.0], e));
+        e.width_factor = golden(
+            |lm| {
+                total(&EdgeRefit {
+                    width_factor: lm.exp(),
+                    ..e
+                })
+            },
+            0.25f64.ln(),
+            4f64.ln(),
+        )
+        .exp();
+        e.residual = golden(|x| total(&EdgeRefit { residual: x, ..e }), 0.0, 0.5);
+        e.dropout = golden(|x| total(&EdgeRefit { dropout: x, ..e }), 0.0, 0.5);
+        (v, pooled) = factors(&e);
+    }
+    Ok((v, pooled, Some(e)))
+}
+
+/// The soft edge re-fitted with a survival term.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct EdgeRefit {
+    /// Factor on every band's `edge_width`.
+    pub width_factor: f64,
+    /// The edge's dropout `ε`.
+    pub dropout: f64,
+    /// The edge's residual survival `π`.
+    pub residual: f64,
+}
 #[cfg(test)]
 mod tests {
     use super::*;
 
     #[test]
     fn golden_finds_a_minimum() {
+        // 34 steps shrink the bracket of width 5 to 4e−7.
         let x = golden(|x| (x - 0.7).powi(2), -2.0, 3.0);
-        assert!((x - 0.7).abs() < 1e-9);
+        assert!((x - 0.7).abs() < 1e-6, "{x}");
     }
 }

@@ -76,23 +76,40 @@ pub struct Finding {
     pub p_adjusted: f64,
     /// Recordings with data.
     pub recordings: usize,
-    /// The stronger covariate that explains this dependence, when re-testing
-    /// after removing it left nothing.
+    /// The covariate that explains this dependence: a stronger one whose
+    /// profile, once removed, leaves nothing; the covariate of an accepted
+    /// extension step after which nothing is left; or `mor` for a column
+    /// that reads the recording's MOR.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub explained_by: Option<String>,
+    /// The extension step (1-based) that accepted this finding's term.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub step: Option<usize>,
+    /// Why this finding's term was turned down (no significant held-out
+    /// gain), when it was tested as a candidate and rejected.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rejected: Option<String>,
     /// Mean residual per bin of the covariate.
     pub profile: Vec<ProfileBin>,
 }
 
-/// The extended model.
+/// The extended model: every accepted term together.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Extended {
-    /// The term, in words.
+    /// The terms, in words, in the order they were accepted.
     pub term: String,
-    /// The term fitted on every recording (as in the extended table).
+    /// The first accepted term fitted on every recording (as in the
+    /// extended table).
     pub extension: ModelExtension,
-    /// Held-out metrics with the term (fitted per fold on the fit set).
+    /// Every accepted term fitted on every recording, in order (as in the
+    /// extended table).
+    pub extensions: Vec<ModelExtension>,
+    /// Held-out metrics with every term (each fitted per fold on the fit
+    /// set).
     pub metrics: Metrics,
+    /// The held-out gain of all terms together on each metric an accepted
+    /// term targets.
+    pub gains: Vec<Gain>,
     /// The scene-level gain (voxel global difference).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub scene_gain: Option<Gain>,
@@ -109,6 +126,43 @@ pub struct Gain {
     pub after: f64,
     /// `(before − after) / before`.
     pub relative: f64,
+}
+
+/// One accepted extension step.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Step {
+    /// The observable the term changes.
+    pub observable: ExtensionObservable,
+    /// Its covariate.
+    pub covariate: String,
+    /// The term, in words.
+    pub term: String,
+    /// Its own held-out gain: the model before the step against the model
+    /// with it, both fitted per fold on the fit set.
+    pub gain: Gain,
+    /// One-sided p-value of the paired test over held-out recordings
+    /// (sign flips of the per-recording loss differences).
+    pub p_value: f64,
+    /// Held-out recordings in the paired test.
+    pub recordings: usize,
+}
+
+/// A candidate term tested and turned down.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Rejected {
+    /// The observable.
+    pub observable: ExtensionObservable,
+    /// The covariate.
+    pub covariate: String,
+    /// The step at which it was tested (1-based).
+    pub step: usize,
+    /// Its held-out gain when it could be measured.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gain: Option<Gain>,
+    /// One-sided p-value of the paired test.
+    pub p_value: f64,
+    /// Why it was turned down.
+    pub reason: String,
 }
 
 /// The report.
@@ -132,10 +186,16 @@ pub struct Report {
     pub baseline: ModelMetrics,
     /// Every test, significant first, strongest first.
     pub findings: Vec<Finding>,
-    /// The extended model (null without a significant finding).
+    /// The extended model with every accepted term (null when no term was
+    /// accepted).
     pub extended: Option<Extended>,
-    /// The gain on the top finding's own metric (null without extension).
+    /// The gain of all accepted terms together on the first accepted
+    /// term's metric (null without extension).
     pub gain: Option<Gain>,
+    /// Every accepted step, in order, with its own held-out gain.
+    pub steps: Vec<Step>,
+    /// Candidates tested and turned down, with the reason.
+    pub rejected: Vec<Rejected>,
 }
 
 impl Report {
@@ -156,8 +216,8 @@ pub struct Diagnosis {
     /// The report.
     pub report: Report,
     /// The table `murk apply` uses: the baseline fitted on every recording
-    /// (or the table given) plus the extension term when there is a
-    /// significant finding; without one, the baseline itself (no term).
+    /// (or the table given) plus every accepted extension term, in step
+    /// order; without one, the baseline itself (no term).
     /// Always present after a run; `None` only in a hand-built value.
     pub extended_table: Option<CoefficientTable>,
     /// Data of the figures.
@@ -209,8 +269,13 @@ impl FigureData {
 /// The method, in words, for the report.
 pub fn method_text(permutations: usize, alpha: f64, r: &Relevance) -> String {
     format!(
-        "Residual = measured − simulated on held-out recordings. Point-level covariates: residuals centred per recording, binned; null by flipping the sign of whole recordings ({permutations} draws). Scan-level covariates: one residual per recording, binned; null by shuffling the covariate across recordings ({permutations} draws). Strength = RMS of the binned profile beyond its null mean, over the relevance threshold (survival {} keep probability, count {} log ratio, range {} m, intensity {} log ratio). Significant = Holm-adjusted p < {alpha} over all tests and effect ≥ threshold; a weaker covariate of the same observable is re-tested after removing the strongest one's profile.",
-        r.survival, r.count, r.range, r.intensity
+        "Residual = measured − simulated on held-out recordings. Point-level covariates: residuals centred per recording, binned; null by flipping the sign of whole recordings ({permutations} draws). Scan-level covariates: one residual per recording, binned; null by shuffling the covariate across recordings ({permutations} draws). Strength = RMS of the binned profile beyond its null mean, over the relevance threshold (survival {} keep probability, count {} log ratio, range {} m, intensity {} log ratio). Significant = Holm-adjusted p < {alpha} over all tests and effect ≥ threshold; a weaker covariate of the same observable is re-tested after removing the strongest one's profile; a weather.csv column that reads the recording's MOR (|r| ≥ {mor_r} on log values) is one quantity with mor. Stagewise: the candidates of the strongest observable each get a term fitted per fold on the fit set; the one with the largest held-out gain is accepted when a paired sign-flip test over held-out recordings (per-recording loss before − after, one-sided) gives p < {alpha}; the model is re-evaluated, every test re-run, and the next term added, until nothing significant is left or {steps} steps. A significant finding is kept only when its term is accepted; one that disappears after a step is explained by that step's covariate.",
+        r.survival,
+        r.count,
+        r.range,
+        r.intensity,
+        mor_r = crate::aliases::MOR_ALIAS_R,
+        steps = crate::MAX_STEPS,
     )
 }
 
@@ -240,6 +305,12 @@ pub fn cause(f: &Finding, weather: WeatherClass) -> String {
         return format!(
             "{} follows {:?} only as far as {:?} does: nothing is left after removing the {by:?} profile",
             f.observable, f.covariate, by
+        );
+    }
+    if let Some(why) = &f.rejected {
+        return format!(
+            "{} along {:?} was tested as an extension and turned down: {why}",
+            f.observable, f.covariate
         );
     }
     if !f.significant {
@@ -337,6 +408,8 @@ mod tests {
                 p_adjusted: 0.01,
                 recordings: 12,
                 explained_by: None,
+                step: None,
+                rejected: None,
                 profile: vec![ProfileBin {
                     label: "wet".into(),
                     center: None,

@@ -144,9 +144,32 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             f.cause
         );
     }
+    for (i, st) in r.steps.iter().enumerate() {
+        outln!(
+            "step {}: {} along {:?}: {} {:.4} → {:.4} on held-out recordings ({:+.1} %, paired p {:.4})",
+            i + 1,
+            st.observable,
+            st.covariate,
+            st.gain.metric,
+            st.gain.before,
+            st.gain.after,
+            100.0 * st.gain.relative,
+            st.p_value
+        );
+    }
+    for x in &r.rejected {
+        outln!(
+            "  turned down: {} along {:?} — {}",
+            x.observable,
+            x.covariate,
+            x.reason
+        );
+    }
     if let Some(g) = &r.gain {
         outln!(
-            "extended along the top finding: {} {:.4} → {:.4} on held-out recordings ({:+.1} %)",
+            "extended with {} term{}: {} {:.4} → {:.4} on held-out recordings ({:+.1} %)",
+            r.steps.len(),
+            if r.steps.len() == 1 { "" } else { "s" },
             g.metric,
             g.before,
             g.after,

@@ -1,0 +1,481 @@
+//! Stagewise extension with held-out acceptance.
+//!
+//! One term is not enough when a campaign hides several effects, and a
+//! significant finding is not yet a reason to extend the model: the
+//! baseline's own misfit (a count law of the wrong shape, a survival edge a
+//! little off) is consistent across recordings and so significant, but a
+//! term along it may gain nothing on recordings it was not fitted on. So:
+//!
+//! 1. attribute the current model's held-out residuals (every observable ×
+//!    covariate, [`crate::DiagnoseValidParams`]'s tests);
+//! 2. take the significant candidates of the strongest observable (at most
+//!    [`CANDIDATES_PER_STEP`]); fit each one's term per fold on the fit set
+//!    *on top of the current model* and evaluate the fold's held-out
+//!    recordings with it;
+//! 3. a candidate passes when a paired test over held-out recordings
+//!    ([`crate::attribution::paired_gain_test`] on the per-recording loss
+//!    before − after, [`recording_loss`]) gives p < α and its metric gains;
+//!    of those that pass, the one with the largest gain is *accepted*, the
+//!    others go back to the pool; a candidate that fails is *rejected* (and
+//!    not tried again). When no candidate of this observable passes, the
+//!    next observable's are tried;
+//! 4. with a term accepted, the model changes: its residuals are tested
+//!    again and the next term is added, until no significant candidate is
+//!    left, none passes, or [`crate::MAX_STEPS`] terms are in.
+//!
+//! The report's findings are those of the baseline, annotated: a finding
+//! whose term was accepted is significant (with its `step`); one that was
+//! significant and is not any more after step *k* is `explained_by` step
+//! *k*'s covariate (what a conditional test asks: does B add anything once A
+//! is in the model?); one whose term was turned down is not significant and
+//! says why (`rejected`).
+
+use std::collections::BTreeMap;
+
+use murk_types::seed::Purpose;
+use murk_types::{CoefficientTable, ExtensionObservable};
+
+use crate::attribution::paired_gain_test;
+use crate::data::Loaded;
+use crate::evaluate::{Metrics, P_FLOOR, RecEval, SimOptions, evaluate};
+use crate::report::{Finding, Gain, Rejected, Step};
+use crate::{
+    Baseline, DiagnoseError, DiagnoseValidParams, Folds, Test, extend, rank, relative_gain, seed_of,
+};
+use murk_fit::FitValidParams;
+
+/// Candidates of one observable fitted and compared per step.
+pub const CANDIDATES_PER_STEP: usize = 3;
+
+/// The loss of one held-out recording on `obs`: mean log loss per expected
+/// return (survival), mean square residual of kept returns (range,
+/// intensity), |log count ratio| (count). `None` without data.
+pub fn recording_loss(loaded: &Loaded, e: &RecEval, obs: ExtensionObservable) -> Option<f64> {
+    let rec = &loaded.recs[e.rec];
+    let mean_sq =
+        |v: &[f64]| (!v.is_empty()).then(|| v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64);
+    match obs {
+        ExtensionObservable::Survival => {
+            let (mut ll, mut n) = (0.0, 0.0);
+            for (u, &p) in rec.units.iter().zip(&e.p) {
+                let p = p.clamp(P_FLOOR, 1.0 - P_FLOOR);
+                let (k, t) = (u.kept as f64, u.trials as f64);
+                ll -= k * p.ln() + (t - k) * (1.0 - p).ln();
+                n += t;
+            }
+            (n > 0.0).then(|| ll / n)
+        }
+        ExtensionObservable::Range => mean_sq(e.range_residual.as_slice()),
+        ExtensionObservable::Intensity => mean_sq(e.intensity_residual.as_slice()),
+        ExtensionObservable::Count => e.count_residual(rec).map(f64::abs),
+    }
+}
+
+/// A candidate term fitted per fold and evaluated held-out.
+struct Candidate {
+    /// The model of each fold with the term.
+    tables: Vec<CoefficientTable>,
+    /// Held-out evaluations with the term, by recording.
+    evals: Vec<RecEval>,
+    /// Its held-out gain on its metric.
+    gain: Option<Gain>,
+    /// Paired test p-value.
+    p_value: f64,
+    /// Recordings in the paired test.
+    recordings: usize,
+    /// Bins of the term (of the last fold).
+    bins: usize,
+    /// The soft edge re-fitted with a survival term (last fold).
+    edge: Option<extend::EdgeRefit>,
+}
+
+/// What the stagewise extension returns.
+pub(crate) struct Stagewise {
+    /// Accepted steps.
+    pub steps: Vec<Step>,
+    /// Rejected candidates.
+    pub rejected: Vec<Rejected>,
+    /// The baseline's findings, annotated, in report order.
+    pub findings: Vec<Finding>,
+    /// Most tests run in one round.
+    pub tests: usize,
+    /// Held-out metrics of the final model (simulated), when a step was
+    /// accepted.
+    pub metrics: Option<Metrics>,
+    /// The table fitted on every recording with every accepted term.
+    pub table: CoefficientTable,
+}
+
+type Key = (ExtensionObservable, String);
+
+fn key(f: &Finding) -> Key {
+    (f.observable, f.covariate.clone())
+}
+
+/// The term of a step in words.
+pub(crate) fn term_text(obs: ExtensionObservable, covariate: &str, bins: usize) -> String {
+    format!(
+        "{} × f({covariate}) — piecewise constant over {bins} bins, fitted per fold on the fit set",
+        match obs {
+            ExtensionObservable::Survival => "vanishing distance",
+            ExtensionObservable::Count => "expected ghost and ring count",
+            ExtensionObservable::Range => "range of kept returns +",
+            ExtensionObservable::Intensity => "reflectivity of kept returns",
+        }
+    )
+}
+
+impl DiagnoseValidParams {
+    /// The stagewise loop (module docs). `full` is the baseline fitted on
+    /// every recording (or the table given).
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn stagewise(
+        &self,
+        loaded: &Loaded,
+        folds: &Folds,
+        baseline: &Baseline,
+        sim: &SimOptions,
+        fit_params: &FitValidParams,
+        mut full: CoefficientTable,
+    ) -> Result<Stagewise, DiagnoseError> {
+        let p = &self.0;
+        let aliases = crate::aliases::of_loaded(loaded);
+        let mut tables = baseline.tables.clone();
+        let mut evals = baseline.evals.clone();
+        let mut steps: Vec<Step> = Vec::new();
+        let mut accepted: Vec<(usize, Key)> = Vec::new();
+        let mut rejected: Vec<Rejected> = Vec::new();
+        let mut rejected_keys: BTreeMap<Key, String> = BTreeMap::new();
+        let mut rounds: Vec<Vec<Finding>> = Vec::new();
+        let mut max_tests = 0;
+        loop {
+            let round = rounds.len();
+            let (tests, findings) = self.attribute(loaded, &evals, &aliases);
+            max_tests = max_tests.max(tests.len());
+            rounds.push(findings.clone());
+            if steps.len() >= crate::MAX_STEPS {
+                break;
+            }
+            // Significant candidates, grouped by observable in report order.
+            let mut groups: Vec<(ExtensionObservable, Vec<usize>)> = Vec::new();
+            for i in rank(&findings) {
+                let f = &findings[i];
+                if !f.significant
+                    || rejected_keys.contains_key(&key(f))
+                    || accepted.iter().any(|(_, k)| *k == key(f))
+                {
+                    continue;
+                }
+                match groups.iter_mut().find(|g| g.0 == f.observable) {
+                    Some(g) => g.1.push(i),
+                    None => groups.push((f.observable, vec![i])),
+                }
+            }
+            let mut took: Option<(usize, Candidate)> = None;
+            for (_, group) in &groups {
+                for &i in group.iter().take(CANDIDATES_PER_STEP) {
+                    let t = &tests[i];
+                    let c =
+                        self.candidate(loaded, folds, &tables, &evals, t, sim, fit_params, round)?;
+                    let rel = c.gain.as_ref().map(|g| g.relative);
+                    let passes = c.p_value < p.alpha && rel.is_some_and(|g| g > 0.0);
+                    if passes {
+                        let better = took.as_ref().is_none_or(|(_, b)| {
+                            rel.unwrap_or(f64::NEG_INFINITY)
+                                > b.gain.as_ref().map_or(f64::NEG_INFINITY, |g| g.relative)
+                        });
+                        if better {
+                            took = Some((i, c));
+                        }
+                    } else {
+                        let reason = match &c.gain {
+                            Some(g) => format!(
+                                "no significant held-out gain: {} {:.5} → {:.5} ({:+.2} %), paired p = {:.4} over {} recordings (needs p < {})",
+                                g.metric,
+                                g.before,
+                                g.after,
+                                100.0 * g.relative,
+                                c.p_value,
+                                c.recordings,
+                                p.alpha
+                            ),
+                            None => {
+                                "its metric could not be measured on held-out recordings".into()
+                            }
+                        };
+                        rejected.push(Rejected {
+                            observable: t.observable,
+                            covariate: t.covariate.clone(),
+                            step: steps.len() + 1,
+                            gain: c.gain.clone(),
+                            p_value: c.p_value,
+                            reason: reason.clone(),
+                        });
+                        rejected_keys.insert((t.observable, t.covariate.clone()), reason);
+                    }
+                }
+                if took.is_some() {
+                    break;
+                }
+            }
+            let Some((i, c)) = took else {
+                break;
+            };
+            let t = &tests[i];
+            full = self.with_full_term(loaded, &full, t, sim, fit_params)?;
+            steps.push(Step {
+                observable: t.observable,
+                covariate: t.covariate.clone(),
+                term: match c.edge {
+                    Some(e) => format!(
+                        "{}; the soft edge re-fitted with it (width × {:.3}, dropout {:.4}, residual {:.4} in the last fold)",
+                        term_text(t.observable, &t.covariate, c.bins),
+                        e.width_factor,
+                        e.dropout,
+                        e.residual
+                    ),
+                    None => term_text(t.observable, &t.covariate, c.bins),
+                },
+                gain: c.gain.clone().expect("an accepted candidate has a gain"),
+                p_value: c.p_value,
+                recordings: c.recordings,
+            });
+            accepted.push((round, (t.observable, t.covariate.clone())));
+            tables = c.tables;
+            evals = c.evals;
+        }
+        // The final model, simulated, for the combined metrics.
+        let metrics = if steps.is_empty() {
+            None
+        } else {
+            let mut fin = Vec::with_capacity(evals.len());
+            for (f, table) in tables.iter().enumerate() {
+                fin.extend(evaluate(
+                    loaded,
+                    table,
+                    &baseline.held[f],
+                    Some(sim),
+                    fit_params,
+                )?);
+            }
+            fin.sort_by_key(|e| e.rec);
+            Some(Metrics::of(loaded, &fin))
+        };
+        let findings = annotate(&rounds, &accepted, &rejected_keys, &steps, p.weather);
+        Ok(Stagewise {
+            steps,
+            rejected,
+            findings,
+            tests: max_tests,
+            metrics,
+            table: full,
+        })
+    }
+
+    /// Fits `t`'s term per fold on the fit set on top of `tables` and
+    /// measures it on the held-out recordings against `evals`.
+    #[allow(clippy::too_many_arguments)]
+    fn candidate(
+        &self,
+        loaded: &Loaded,
+        folds: &Folds,
+        tables: &[CoefficientTable],
+        evals: &[RecEval],
+        t: &Test,
+        sim: &SimOptions,
+        fit_params: &FitValidParams,
+        round: usize,
+    ) -> Result<Candidate, DiagnoseError> {
+        let p = &self.0;
+        // Counts need simulated near-range returns; the other observables
+        // are read from the keep probabilities and kept returns, and keep
+        // the current simulations.
+        let count = t.observable == ExtensionObservable::Count;
+        let with_sim = count.then_some(sim);
+        let mut new_tables = Vec::with_capacity(folds.k);
+        let mut new_evals = Vec::with_capacity(evals.len());
+        let mut bins = 0;
+        let mut edge = None;
+        // A survival term re-fits the soft edge with it; the covariate must
+        // add something beyond that re-fit: its paired test is against the
+        // same fit with one bin (a constant factor and the re-fitted edge).
+        let survival = t.observable == ExtensionObservable::Survival;
+        let mut null_evals = Vec::new();
+        for (f, table) in tables.iter().enumerate().take(folds.k) {
+            let fit_set = folds.fit_set(f);
+            let in_sample = evaluate(loaded, table, &fit_set, with_sim, fit_params)?;
+            let binning = self.extension_binning(loaded, &fit_set, t);
+            bins = binning.len();
+            let term = extend::fit_term_with_edge(
+                loaded,
+                table,
+                &in_sample,
+                t.observable,
+                &t.covariate,
+                &binning,
+                true,
+            )?;
+            edge = term.edge;
+            let mut ext = table.clone();
+            term.apply_to(&mut ext, p.weather);
+            if survival {
+                // One bin along the recording's MOR, which every recording
+                // has: a constant factor.
+                let one = extend::fit_term_with_edge(
+                    loaded,
+                    table,
+                    &in_sample,
+                    t.observable,
+                    "mor",
+                    &crate::attribution::Binning::Numeric { edges: vec![] },
+                    true,
+                )?;
+                let mut null = table.clone();
+                one.apply_to(&mut null, p.weather);
+                null_evals.extend(evaluate(
+                    loaded,
+                    &null,
+                    &folds.held_out(f),
+                    None,
+                    fit_params,
+                )?);
+            }
+            let mut held = evaluate(loaded, &ext, &folds.held_out(f), with_sim, fit_params)?;
+            if !count {
+                for e in held.iter_mut() {
+                    if let Some(old) = evals.iter().find(|o| o.rec == e.rec) {
+                        e.near_sim = old.near_sim;
+                        e.scene = old.scene;
+                    }
+                }
+            }
+            new_evals.extend(held);
+            new_tables.push(ext);
+        }
+        new_evals.sort_by_key(|e| e.rec);
+        let obs = t.observable;
+        null_evals.sort_by_key(|e| e.rec);
+        let reference = if survival { &null_evals } else { evals };
+        let d: Vec<f64> = reference
+            .iter()
+            .zip(&new_evals)
+            .filter_map(|(a, b)| {
+                Some(recording_loss(loaded, a, obs)? - recording_loss(loaded, b, obs)?)
+            })
+            .collect();
+        let seed = seed_of(
+            p.seed,
+            Purpose::DiagnoseTest,
+            &["paired", obs.name(), &t.covariate, &round.to_string()],
+        );
+        let p_value = paired_gain_test(&d, p.permutations, seed);
+        let (metric, before) = Metrics::of(loaded, evals).of_observable(obs);
+        let (_, after) = Metrics::of(loaded, &new_evals).of_observable(obs);
+        Ok(Candidate {
+            tables: new_tables,
+            evals: new_evals,
+            gain: relative_gain(metric, before, after),
+            p_value,
+            recordings: d.len(),
+            bins,
+            edge,
+        })
+    }
+
+    /// `full` with `t`'s term fitted on every recording on top of it.
+    fn with_full_term(
+        &self,
+        loaded: &Loaded,
+        full: &CoefficientTable,
+        t: &Test,
+        sim: &SimOptions,
+        fit_params: &FitValidParams,
+    ) -> Result<CoefficientTable, DiagnoseError> {
+        let all: Vec<usize> = (0..loaded.recs.len()).collect();
+        let with_sim = (t.observable == ExtensionObservable::Count).then_some(sim);
+        let in_sample = evaluate(loaded, full, &all, with_sim, fit_params)?;
+        let binning = self.extension_binning(loaded, &all, t);
+        let term = extend::fit_term_with_edge(
+            loaded,
+            full,
+            &in_sample,
+            t.observable,
+            &t.covariate,
+            &binning,
+            true,
+        )?;
+        let mut table = full.clone();
+        term.apply_to(&mut table, self.0.weather);
+        Ok(table)
+    }
+}
+
+/// The baseline's findings annotated with what the steps did to them (module
+/// docs), in report order.
+fn annotate(
+    rounds: &[Vec<Finding>],
+    accepted: &[(usize, Key)],
+    rejected: &BTreeMap<Key, String>,
+    steps: &[Step],
+    weather: murk_types::WeatherClass,
+) -> Vec<Finding> {
+    let mut out: Vec<Finding> = rounds[0].clone();
+    let last = rounds.len() - 1;
+    let find = |r: usize, k: &Key| rounds[r].iter().find(|f| &key(f) == k);
+    for f in out.iter_mut() {
+        let k = key(f);
+        if let Some(s) = accepted.iter().position(|(_, a)| *a == k) {
+            let round = accepted[s].0;
+            if let Some(g) = find(round, &k) {
+                *f = g.clone();
+            }
+            f.significant = true;
+            f.explained_by = None;
+            f.step = Some(s + 1);
+            f.cause = crate::report::cause(f, weather);
+            continue;
+        }
+        if let Some(why) = rejected.get(&k) {
+            f.significant = false;
+            f.rejected = Some(why.clone());
+            f.cause = crate::report::cause(f, weather);
+            continue;
+        }
+        // The last round in which it was significant.
+        let Some(r) = (0..=last)
+            .rev()
+            .find(|&r| find(r, &k).is_some_and(|g| g.significant))
+        else {
+            continue;
+        };
+        if r == last {
+            // Still significant: the step cap stopped the loop first.
+            if !f.significant
+                && let Some(g) = find(r, &k)
+            {
+                *f = g.clone();
+            }
+            f.cause = format!(
+                "{} (not extended: the {} steps allowed were used first)",
+                f.cause,
+                crate::MAX_STEPS
+            );
+            continue;
+        }
+        // Significant in round r, not after the step accepted then.
+        if let Some(s) = accepted.iter().position(|(ar, _)| *ar == r) {
+            f.significant = false;
+            f.explained_by = Some(steps[s].covariate.clone());
+            f.cause = format!(
+                "{} follows {:?} only as far as {} along {:?} does: nothing is left once that term (step {}) is in the model",
+                f.observable,
+                f.covariate,
+                steps[s].observable,
+                steps[s].covariate,
+                s + 1
+            );
+        }
+    }
+    let order = rank(&out);
+    order.into_iter().map(|i| out[i].clone()).collect()
+}
