@@ -1,8 +1,8 @@
 //! From accumulated statistics to the coefficient table (no I/O).
 
 use murk_types::{
-    CountLaw, Gaussian, MorBin, NoiseLaw, RainConversion, SlopeBand, SurvivalFit, SweepBand,
-    Uncertainty, WeatherClass, WeatherCoefficients,
+    CountLaw, EdgeTest, Gaussian, Interval, MorBin, NoiseLaw, RainConversion, SlopeBand,
+    SurvivalFit, SweepBand, Uncertainty, WeatherClass, WeatherCoefficients,
 };
 
 use crate::FitValidParams;
@@ -21,7 +21,8 @@ use crate::stats::truncnorm::{
     is_quantized,
 };
 use crate::survival::{
-    Partition, SurvivalOptions, SurvivalResult, fit_slope_only, fit_survival, precheck,
+    EdgeEvidence, Partition, RecordingTrials, RobustIntervals, SurvivalOptions, SurvivalResult,
+    edge_test, fit_slope_only, fit_survival, precheck, robust_covariance, robust_intervals,
 };
 
 /// Converts a bootstrap summary to the table's type.
@@ -384,6 +385,70 @@ pub fn weather(
         ml.as_ref()
             .and_then(|m| m.bands[i].slope.as_ref().ok().copied())
     };
+    // Each recording's share of the likelihood: intervals over recordings
+    // and the held-out test of the edge against range alone.
+    let classes: Vec<_> = bands.iter().map(|b| cx.partition.classes_in(b)).collect();
+    let per_recording: Vec<RecordingTrials> = acc
+        .rows
+        .iter()
+        .map(|r| RecordingTrials {
+            bands: classes
+                .iter()
+                .map(|c| acc.survival.cell_observations(&r.survival, c.clone()))
+                .collect(),
+            ln_mor_scaled: r.ln_mor_scaled,
+            mor: r.mor,
+        })
+        .collect();
+    let (robust, evidence) = match &ml {
+        Some(m) => {
+            let clusters: Vec<Vec<Vec<crate::survival::Obs>>> =
+                per_recording.iter().map(|r| r.bands.clone()).collect();
+            let remove = |g: usize, h: &mut crate::survival::SurvivalHistogram| {
+                h.add_cells(&acc.rows[g].survival, -1)
+            };
+            (
+                robust_intervals(
+                    m,
+                    robust_covariance(m, &clusters, &opts).as_ref(),
+                    &opts,
+                    bands.len(),
+                ),
+                edge_test(
+                    &acc.survival,
+                    &per_recording,
+                    &classes,
+                    &remove,
+                    &opts,
+                    p.edge_test_folds() as usize,
+                    murk_types::seed::derive(
+                        p.seed(),
+                        &murk_types::seed::key(&["edge-test", cx.class.name()]),
+                        murk_types::seed::Purpose::Bootstrap,
+                    )
+                    .bytes(),
+                ),
+            )
+        }
+        None => (RobustIntervals::default(), vec![]),
+    };
+    let interval = |[low, high]: [f64; 2]| Interval {
+        low,
+        high,
+        level: 0.95,
+        method: "cluster-robust over recordings".into(),
+    };
+    let alpha = p.edge_test_alpha();
+    let seen_in = |e: &EdgeEvidence| e.gain > 0.0 && e.p <= alpha;
+    let edge_record = |e: &EdgeEvidence| EdgeTest {
+        gain_nats_per_recording: e.gain,
+        recordings_better: e.better as u32,
+        recordings: e.recordings as u32,
+        p_value: e.p,
+        alpha,
+        folds: p.edge_test_folds(),
+        edge_seen: seen_in(e),
+    };
 
     let vanishing_slope: Vec<SlopeBand> = bands
         .iter()
@@ -391,16 +456,46 @@ pub fn weather(
         .map(|(i, b)| {
             let trials: u64 = obs[i].iter().map(|o| o.total as u64).sum();
             match &ml {
-                Some(m) => SlopeBand {
-                    reflectivity_min: b.min,
-                    reflectivity_max: b.max,
-                    slope: m.bands[i].slope.as_ref().ok().copied(),
-                    points: trials,
-                    reason: m.bands[i].slope.as_ref().err().cloned(),
-                    std_error: m.bands[i].std_error,
-                    edge_width: m.bands[i].width,
-                    mor_bins: vec![],
-                },
+                Some(m) => {
+                    let test = evidence.get(i);
+                    let mut slope = m.bands[i].slope.clone();
+                    if let (Ok(_), Some(t)) = (&slope, test) {
+                        match t {
+                            Ok(e) if seen_in(e) => {}
+                            Ok(e) if 0.5f64.powi(e.recordings as i32) > alpha => {
+                                slope = Err(format!(
+                                    "no edge can be shown: {} recordings have returns in this band, and the sign-flip test over recordings needs at least {} to reach its level {alpha}",
+                                    e.recordings,
+                                    (1.0 / alpha).log2().ceil()
+                                ))
+                            }
+                            Ok(e) => {
+                                slope = Err(format!(
+                                    "no edge: on held-out recordings survival by r/MOR predicts no better than survival by range alone (gain {:.3} nats per recording, better in {} of {} recordings, sign-flip p {:.3} > {alpha})",
+                                    e.gain, e.better, e.recordings, e.p
+                                ))
+                            }
+                            Err(why) => slope = Err(format!("no edge can be shown: {why}")),
+                        }
+                    }
+                    let seen = slope.is_ok();
+                    SlopeBand {
+                        reflectivity_min: b.min,
+                        reflectivity_max: b.max,
+                        slope: slope.as_ref().ok().copied(),
+                        points: trials,
+                        reason: slope.as_ref().err().cloned(),
+                        std_error: robust.slopes[i].map(|r| r.0).filter(|_| seen),
+                        std_error_independent: m.bands[i].std_error.filter(|_| seen),
+                        ci95: robust.slopes[i]
+                            .filter(|_| seen)
+                            .map(|(_, ci)| interval(ci)),
+                        edge_test: test.and_then(|t| t.as_ref().ok()).map(edge_record),
+                        edge_width: m.bands[i].width,
+                        edge_width_ci95: robust.widths.get(i).copied().flatten().map(&interval),
+                        mor_bins: vec![],
+                    }
+                }
                 None => SlopeBand {
                     reflectivity_min: b.min,
                     reflectivity_max: b.max,
@@ -414,7 +509,11 @@ pub fn weather(
                             }),
                     ),
                     std_error: None,
+                    std_error_independent: None,
+                    ci95: None,
+                    edge_test: None,
                     edge_width: None,
+                    edge_width_ci95: None,
                     mor_bins: vec![],
                 },
             }
@@ -437,7 +536,11 @@ pub fn weather(
                 points: qs.iter().filter(|q| q.used).map(|q| q.points).sum(),
                 reason: slope.err(),
                 std_error: None,
+                std_error_independent: None,
+                ci95: None,
+                edge_test: None,
                 edge_width: None,
+                edge_width_ci95: None,
                 mor_bins: qs.iter().map(to_mor_bin).collect(),
             }
         })
@@ -531,6 +634,7 @@ pub fn weather(
             edge: p.edge(),
             dropout: m.dropout,
             dropout_clear: cx.dropout_clear,
+            dropout_ci95: robust.dropout.map(&interval),
             residual: m.residual,
             neg_log_likelihood: m.nll,
             trials: m.trials,

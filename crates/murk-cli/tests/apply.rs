@@ -484,3 +484,47 @@ fn round_trip_generator_fit_apply_matches_the_degraded_recordings_in_fog_rain_an
         }
     }
 }
+
+/// A fog band whose slope the fit left null because the data showed no
+/// edge (issue #12): the table still loads, applying fog names the band and
+/// the reason and writes nothing, the identity (clear MOR) and the other
+/// weathers still apply.
+#[test]
+fn a_null_slope_from_the_edge_test_is_refused_with_its_reason() {
+    let (dir, table, input) = setup();
+    let mut t: serde_json::Value = serde_json::from_str(TABLE).unwrap();
+    t["weathers"]["fog"]["vanishing_slope"][0] = serde_json::json!({
+        "reflectivity_min": 0, "reflectivity_max": 10, "slope": null, "points": 5000,
+        "reason": "no edge: on held-out recordings survival by r/MOR predicts no better than survival by range alone",
+        "edge_test": { "gain_nats_per_recording": -1.5, "recordings_better": 3,
+                       "recordings": 30, "p_value": 1.0, "alpha": 0.01, "folds": 5,
+                       "edge_seen": false }
+    });
+    std::fs::write(&table, serde_json::to_string(&t).unwrap()).unwrap();
+    let run = |weather: &str, mor: &str, out: &str| {
+        murk(&[
+            "apply",
+            "--coefficients",
+            table.to_str().unwrap(),
+            "--weather",
+            weather,
+            "--mor",
+            mor,
+            input.to_str().unwrap(),
+            "--out",
+            dir.path().join(out).to_str().unwrap(),
+        ])
+    };
+    let o = run("fog", "60", "fog");
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o.stderr));
+    let e = text(&o.stderr);
+    assert!(
+        e.contains("weathers.fog.vanishing_slope[0].slope") && e.contains("no edge"),
+        "{e}"
+    );
+    assert!(!dir.path().join("fog").join("a.pcd").exists());
+    let o = run("fog", "5000", "identity");
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let o = run("rain", "60", "rain");
+    assert!(o.status.success(), "{}", text(&o.stderr));
+}

@@ -313,6 +313,9 @@ impl DiagnoseParams {
                     self.weather
                 )));
             }
+            if let Some(why) = null_slope(t, self.weather) {
+                return Err(DiagnoseError::Table(format!("the table {why}")));
+            }
         }
         Ok(DiagnoseValidParams(self))
     }
@@ -471,6 +474,26 @@ fn rank(findings: &[Finding]) -> Vec<usize> {
             .then(a.cmp(&b))
     });
     idx
+}
+
+/// Why `table` cannot simulate `weather`, when one of its vanishing bands
+/// has a null slope (the fit saw no edge there, or too few returns): the
+/// held-out recordings are simulated with every band's slope, and a
+/// diagnosis of a model that is not there would only restate the reason.
+fn null_slope(table: &CoefficientTable, weather: WeatherClass) -> Option<String> {
+    let w = table.weathers.get(&weather)?;
+    let (i, b) = w
+        .vanishing_slope
+        .iter()
+        .enumerate()
+        .find(|(_, b)| b.slope.is_none())?;
+    Some(format!(
+        "gives {weather} no vanishing slope in band {i} (reflectivity [{}, {})): {}; held-out recordings cannot be simulated without it",
+        b.reflectivity_min,
+        b.reflectivity_max
+            .map_or("∞".to_string(), |m| m.to_string()),
+        b.reason.as_deref().unwrap_or("no reason given")
+    ))
 }
 
 impl DiagnoseValidParams {
@@ -801,6 +824,12 @@ impl DiagnoseValidParams {
             return Err(DiagnoseError::Campaign {
                 weather: loaded.weather.to_string(),
                 reason: format!("the fit on {what} produced no model for it"),
+            });
+        }
+        if let Some(why) = null_slope(&table, loaded.weather) {
+            return Err(DiagnoseError::Campaign {
+                weather: loaded.weather.to_string(),
+                reason: format!("the fit on {what} {why}"),
             });
         }
         Ok(table)

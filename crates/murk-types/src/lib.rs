@@ -70,9 +70,9 @@ pub use format::{BinLayout, PointFormat};
 pub use intensity::IntensityScale;
 pub use lidar::LidarSpec;
 pub use table::{
-    ClearCoefficients, CoefficientTable, CountLaw, ExcludedRecording, Gaussian, InputDigest,
-    MorBin, NoiseLaw, Provenance, RadarCoefficients, RainConversion, SlopeBand, SurvivalFit,
-    SweepBand, TABLE_FORMAT, TableLidar, Uncertainty, WeatherCoefficients,
+    ClearCoefficients, CoefficientTable, CountLaw, EdgeTest, ExcludedRecording, Gaussian,
+    InputDigest, Interval, MorBin, NoiseLaw, Provenance, RadarCoefficients, RainConversion,
+    SlopeBand, SurvivalFit, SweepBand, TABLE_FORMAT, TableLidar, Uncertainty, WeatherCoefficients,
 };
 pub use walk::{LeftOut, Walk, WalkedFile, walk_folder};
 pub use weather::WeatherClass;
