@@ -439,15 +439,38 @@ pub fn weather(
         method: "cluster-robust over recordings".into(),
     };
     let alpha = p.edge_test_alpha();
-    let seen_in = |e: &EdgeEvidence| e.gain > 0.0 && e.p <= alpha;
-    let edge_record = |e: &EdgeEvidence| EdgeTest {
+    // Where the MORs spread less than the edge is wide, r/MOR and r cannot
+    // be told apart: the edge is then tested against constant survival.
+    let width = |i: usize| {
+        ml.as_ref()
+            .and_then(|m| m.bands.get(i))
+            .and_then(|b| b.width)
+            .unwrap_or(0.0)
+    };
+    let narrow = |i: usize, e: &EdgeEvidence| e.mor_spread < width(i);
+    let seen_in = |i: usize, e: &EdgeEvidence| {
+        if narrow(i, e) {
+            e.gain_constant > 0.0 && e.p_constant <= alpha
+        } else {
+            e.gain > 0.0 && e.p <= alpha
+        }
+    };
+    let edge_record = |i: usize, e: &EdgeEvidence| EdgeTest {
         gain_nats_per_recording: e.gain,
         recordings_better: e.better as u32,
         recordings: e.recordings as u32,
         p_value: e.p,
         alpha,
+        gain_over_constant_nats_per_recording: e.gain_constant,
+        p_value_over_constant: e.p_constant,
+        mor_spread: e.mor_spread,
+        basis: if narrow(i, e) {
+            "edge against constant survival".into()
+        } else {
+            "r/MOR against range alone".into()
+        },
         folds: p.edge_test_folds(),
-        edge_seen: seen_in(e),
+        edge_seen: seen_in(i, e),
     };
 
     let vanishing_slope: Vec<SlopeBand> = bands
@@ -459,14 +482,23 @@ pub fn weather(
                 Some(m) => {
                     let test = evidence.get(i);
                     let mut slope = m.bands[i].slope.clone();
-                    if let (Ok(_), Some(t)) = (&slope, test) {
+                    if let (Ok(_), Some(t), true) = (&slope, test, p.require_edge()) {
                         match t {
-                            Ok(e) if seen_in(e) => {}
+                            Ok(e) if seen_in(i, e) => {}
                             Ok(e) if 0.5f64.powi(e.recordings as i32) > alpha => {
                                 slope = Err(format!(
-                                    "no edge can be shown: {} recordings have returns in this band, and the sign-flip test over recordings needs at least {} to reach its level {alpha}",
+                                    "no edge can be shown: too few recordings ({}) with returns in this band for the sign-flip test over recordings to reach its level {alpha} (it needs {})",
                                     e.recordings,
                                     (1.0 / alpha).log2().ceil()
+                                ))
+                            }
+                            Ok(e) if narrow(i, e) => {
+                                slope = Err(format!(
+                                    "no edge: the MORs spread too little (sd of ln MOR {:.3} < edge width {:.3}) to tell r/MOR from range, and on held-out recordings the edge predicts survival no better than a constant (gain {:.3} nats per recording, sign-flip p {:.3} > {alpha})",
+                                    e.mor_spread,
+                                    width(i),
+                                    e.gain_constant,
+                                    e.p_constant
                                 ))
                             }
                             Ok(e) => {
@@ -490,7 +522,9 @@ pub fn weather(
                         ci95: robust.slopes[i]
                             .filter(|_| seen)
                             .map(|(_, ci)| interval(ci)),
-                        edge_test: test.and_then(|t| t.as_ref().ok()).map(edge_record),
+                        edge_test: test
+                            .and_then(|t| t.as_ref().ok())
+                            .map(|e| edge_record(i, e)),
                         edge_width: m.bands[i].width,
                         edge_width_ci95: robust.widths.get(i).copied().flatten().map(&interval),
                         mor_bins: vec![],
@@ -553,13 +587,16 @@ pub fn weather(
     let all_q = band_quantiles(acc, &means, &all_cells, p, None, rs);
     let all_q99 = quantile_slope(&all_q, rs).ok();
 
-    // Figure 27: both estimators over the sweep bands.
+    // Figure 27: both estimators over the sweep bands; the ML one only
+    // where some band of the table showed an edge (it reuses that fit's
+    // width, ε and π, which describe no edge otherwise).
+    let edge_seen = vanishing_slope.iter().any(|b| b.slope.is_some());
     let reflectivity_sweep: Vec<SweepBand> = sweep
         .iter()
         .map(|b| {
             let o = band_obs(acc, cx.partition, b);
             let trials: u64 = o.iter().map(|x| x.total as u64).sum();
-            let slope = ml.as_ref().and_then(|m| {
+            let slope = ml.as_ref().filter(|_| edge_seen).and_then(|m| {
                 let w = m.bands.iter().find_map(|x| x.width)?;
                 fit_slope_only(
                     &o,

@@ -70,6 +70,7 @@ impl Band {
 /// | `shared_edge_width` | true | one edge width for all bands (else one per band) | |
 /// | `free_dropout` | true | fit the dropout ε per weather (else fix it to the clear-weather value) | |
 /// | `edge_test_folds` | 5 | folds over recordings of the held-out test of the edge model against survival by range alone (a slope is reported only when the edge predicts held-out recordings better) | 2–50 |
+/// | `require_edge` | true | report a slope only where the held-out edge test sees an edge (false: the test still runs and is recorded in `edge_test`, and the slope is kept — the seed's law taken on trust, as murk diagnose's baselines do to measure what it gets wrong) | |
 /// | `edge_test_alpha` | 0.01 | level of the one-sided sign-flip test of the held-out gains over recordings (an edge needs at least ⌈log₂(1/α)⌉ recordings: 7 at 1 %) | (0, 0.5] |
 /// | `survival_log_step` | 0.01 | bin width of ln(r / MOR) in the survival histogram (1 % in range: far finer than any edge or slope the data resolve) | (0, 0.1] |
 /// | `reflectivity_floor` | 0 | lower truncation of the ghost/ring reflectivity laws | finite |
@@ -101,6 +102,7 @@ pub struct FitValidParams {
     pub(crate) shared_edge_width: bool,
     pub(crate) free_dropout: bool,
     pub(crate) edge_test_folds: u32,
+    pub(crate) require_edge: bool,
     pub(crate) edge_test_alpha: f64,
     pub(crate) survival_log_step: f64,
     pub(crate) reflectivity_floor: f64,
@@ -131,6 +133,7 @@ impl Default for FitParams {
             shared_edge_width: true,
             free_dropout: true,
             edge_test_folds: 5,
+            require_edge: true,
             edge_test_alpha: 0.01,
             survival_log_step: 0.01,
             reflectivity_floor: 0.0,
@@ -193,6 +196,8 @@ impl FitParams {
         free_dropout: bool);
     setter!(/// Sets `edge_test_folds`.
         edge_test_folds: u32);
+    setter!(/// Sets `require_edge`.
+        require_edge: bool);
     setter!(/// Sets `edge_test_alpha`.
         edge_test_alpha: f64);
     setter!(/// Sets `survival_log_step`.
@@ -420,6 +425,11 @@ impl FitValidParams {
     /// `edge_test_folds`.
     pub fn edge_test_folds(&self) -> u32 {
         self.edge_test_folds
+    }
+
+    /// `require_edge`.
+    pub fn require_edge(&self) -> bool {
+        self.require_edge
     }
 
     /// `edge_test_alpha`.

@@ -675,6 +675,14 @@ pub struct EdgeEvidence {
     pub recordings: usize,
     /// Recordings whose gain is positive.
     pub better: usize,
+    /// Mean held-out gain of the edge model over survival that depends on
+    /// nothing (the training folds' pooled keep rate), nats per recording.
+    pub gain_constant: f64,
+    /// Its one-sided sign-flip p-value.
+    pub p_constant: f64,
+    /// Standard deviation of `ln MOR` over the recordings with trials in
+    /// the band: how far their MORs spread, relatively.
+    pub mor_spread: f64,
 }
 
 /// Sign flips drawn when there are too many recordings to enumerate them.
@@ -747,6 +755,12 @@ pub struct RecordingTrials {
 /// Tests, per band, the edge model against the no-weather model by
 /// predicting held-out recordings.
 ///
+/// Each recording is also scored against survival that depends on nothing
+/// (the training folds' pooled keep rate): where the MORs spread less than
+/// the edge is wide, an edge in `r/MOR` and one in `r` cannot be told apart,
+/// and the caller may fall back on that comparison (see the fit's
+/// `edge_test`).
+///
 /// The no-weather model lets survival depend on range alone, in bins of
 /// [`RANGE_ONLY_STEP`] in `ln r` (so range-dependent clear dropout, a scene
 /// whose far returns flicker, or a sensor whose far returns fade, all belong
@@ -812,6 +826,8 @@ pub fn edge_test(
         }
     }
     let mut gains: Vec<Vec<f64>> = vec![Vec::new(); n_b];
+    let mut gains_constant: Vec<Vec<f64>> = vec![Vec::new(); n_b];
+    let mut ln_mors: Vec<Vec<f64>> = vec![Vec::new(); n_b];
     let mut failed: Vec<Option<String>> = vec![None; n_b];
     let lp = |p: f64| p.clamp(1e-12, 1.0 - 1e-12);
     for f in 0..folds {
@@ -838,6 +854,8 @@ pub fn edge_test(
                     continue;
                 }
                 let mut d = 0.0;
+                let mut dc = 0.0;
+                let pc = lp((kk + 0.5) / (nn + 1.0));
                 for o in &r.bands[b] {
                     let Some(pe) = fit.as_ref().and_then(|m| m.keep_probability(opts, b, o.u))
                     else {
@@ -856,8 +874,12 @@ pub fn edge_test(
                     let pe = lp(pe);
                     d += o.kept * (pe / pr).ln()
                         + (o.total - o.kept) * ((1.0 - pe) / (1.0 - pr)).ln();
+                    dc += o.kept * (pe / pc).ln()
+                        + (o.total - o.kept) * ((1.0 - pe) / (1.0 - pc)).ln();
                 }
                 gains[b].push(d);
+                gains_constant[b].push(dc);
+                ln_mors[b].push(r.mor.ln());
             }
         }
     }
@@ -874,11 +896,19 @@ pub fn edge_test(
                 ));
             }
             let mean = g.iter().sum::<f64>() / n as f64;
+            let gc = &gains_constant[b];
+            let lm = &ln_mors[b];
+            let lm_mean = lm.iter().sum::<f64>() / n as f64;
             Ok(EdgeEvidence {
                 gain: mean,
                 p: sign_flip_p(g, seed),
                 recordings: n,
                 better: g.iter().filter(|x| **x > 0.0).count(),
+                gain_constant: gc.iter().sum::<f64>() / n as f64,
+                p_constant: sign_flip_p(gc, seed),
+                mor_spread: (lm.iter().map(|x| (x - lm_mean).powi(2)).sum::<f64>()
+                    / (n as f64 - 1.0))
+                    .sqrt(),
             })
         })
         .collect()

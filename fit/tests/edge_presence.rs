@@ -167,11 +167,16 @@ fn describe(b: &SlopeBand) -> String {
     }
 }
 
-/// (non-null slopes, bands) over `seeds` on relabelled clear frames.
-fn false_positives(revs: &[PointCloud], seeds: std::ops::Range<u64>) -> (usize, usize) {
+/// (non-null slopes, bands) over `seeds` on relabelled clear frames at
+/// MORs log-uniform on `mor_range`.
+fn false_positives(
+    revs: &[PointCloud],
+    seeds: std::ops::Range<u64>,
+    mor_range: [f64; 2],
+) -> (usize, usize) {
     let (mut hits, mut n) = (0, 0);
     for seed in seeds {
-        for b in fog_bands(revs, seed, [9.0, 390.0], 0.03, Weather::Nothing) {
+        for b in fog_bands(revs, seed, mor_range, 0.03, Weather::Nothing) {
             n += 1;
             hits += usize::from(b.slope.is_some());
             eprintln!(
@@ -223,9 +228,23 @@ fn known_edge(revs: &[PointCloud], seeds: std::ops::Range<u64>) -> (usize, usize
 #[test]
 fn real_clear_frames_labelled_fog_get_no_slope() {
     let Some(revs) = revolutions() else { return };
-    let (hits, n) = false_positives(&revs, 0..4);
-    // The test is one-sided at 1 %: a slope in more than one of 8 bands
+    let (hits, n) = false_positives(&revs, 0..3, [9.0, 390.0]);
+    // The test is one-sided at 1 %: a slope in more than one of 6 bands
     // means it does not hold its level.
+    assert!(
+        hits <= 1,
+        "{hits}/{n} bands of a weather that does nothing got a slope"
+    );
+}
+
+/// The same at nearly one MOR (20–22 m, where an edge of slope 0.3–1
+/// would lie amid the scene): r/MOR cannot be told from range, so the edge
+/// is tested against constant survival — which the far returns' own
+/// flicker must not pass for.
+#[test]
+fn real_clear_frames_labelled_fog_at_one_mor_get_no_slope() {
+    let Some(revs) = revolutions() else { return };
+    let (hits, n) = false_positives(&revs, 10..13, [20.0, 22.0]);
     assert!(
         hits <= 1,
         "{hits}/{n} bands of a weather that does nothing got a slope"
@@ -235,18 +254,20 @@ fn real_clear_frames_labelled_fog_get_no_slope() {
 #[test]
 fn real_frames_with_a_hand_written_edge_give_it_back() {
     let Some(revs) = revolutions() else { return };
-    let (seen, covered, n, worst) = known_edge(&revs, 0..4);
+    let (seen, covered, n, worst) = known_edge(&revs, 0..3);
     assert_eq!(seen, n, "the edge was not seen in every band");
     assert!(worst < 0.05, "worst slope error {:.2} %", 100.0 * worst);
-    // 8 intervals at 95 %: P(≤ 5 covered) < 1 %.
-    assert!(covered >= 6, "covered {covered}/{seen}");
+    // 6 intervals at 95 %: P(≤ 3 covered) < 0.3 %.
+    assert!(covered >= 4, "covered {covered}/{seen}");
 }
 
 #[test]
 #[ignore = "the measurement behind the report: 20 labellings and 20 seeds"]
 fn real_frames_false_positive_rate_and_power() {
     let Some(revs) = revolutions() else { return };
-    let (hits, n) = false_positives(&revs, 100..120);
+    let (hits, n) = false_positives(&revs, 100..120, [9.0, 390.0]);
+    let (hits_narrow, n_narrow) = false_positives(&revs, 200..210, [20.0, 22.0]);
+    eprintln!("SUMMARY narrow MOR: false positives {hits_narrow}/{n_narrow}");
     let (seen, covered, m, worst) = known_edge(&revs, 100..120);
     eprintln!(
         "SUMMARY false positives {hits}/{n}; power {seen}/{m}; coverage {covered}/{seen}; worst error {:.2} %",

@@ -497,8 +497,13 @@ fn null_slope(table: &CoefficientTable, weather: WeatherClass) -> Option<String>
 }
 
 impl DiagnoseValidParams {
+    /// The baselines keep the seed's law where the held-out edge test does
+    /// not confirm it (`require_edge` off; the test is still recorded in
+    /// the table's `edge_test`): a diagnosis measures what the law gets
+    /// wrong, which it cannot do with no slope to simulate.
     fn fit_params(&self) -> Result<FitValidParams, DiagnoseError> {
         FitParams::default()
+            .require_edge(false)
             .bootstrap_replicates(0)
             .seed(self.0.seed)
             .check()

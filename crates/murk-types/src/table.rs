@@ -194,7 +194,13 @@ pub struct Interval {
 /// held-out log-likelihoods (edge − range alone); `p_value` is the one-sided
 /// sign-flip (randomisation) p-value of their mean over the `recordings`
 /// (exact up to 20 recordings), and the edge counts as seen (`edge_seen`)
-/// when the mean gain is positive and `p_value ≤ alpha`.
+/// when the mean gain is positive and `p_value ≤ alpha`. Where the
+/// recordings' MORs spread less than the edge is wide (`mor_spread`, the
+/// standard deviation of `ln MOR`, below the fitted relative edge width),
+/// an edge in `r/MOR` cannot be told from one in `r`; the edge is then
+/// tested against survival that depends on nothing instead
+/// (`gain_over_constant_nats_per_recording`, `p_value_over_constant`), and
+/// `basis` says which comparison decided.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct EdgeTest {
     /// Mean held-out log-likelihood gain per recording, nats.
@@ -207,6 +213,17 @@ pub struct EdgeTest {
     pub p_value: f64,
     /// The level the p-value must reach.
     pub alpha: f64,
+    /// Mean held-out gain over survival that depends on nothing, nats per
+    /// recording.
+    pub gain_over_constant_nats_per_recording: f64,
+    /// Its one-sided sign-flip p-value.
+    pub p_value_over_constant: f64,
+    /// Standard deviation of `ln MOR` over the recordings.
+    pub mor_spread: f64,
+    /// The comparison that decided: `r/MOR against range alone` or, where
+    /// `mor_spread` is below the edge width, `edge against constant
+    /// survival`.
+    pub basis: String,
     /// Folds over recordings.
     pub folds: u32,
     /// True when the test saw an edge.
