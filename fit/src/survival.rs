@@ -686,7 +686,7 @@ pub struct EdgeEvidence {
 }
 
 /// Sign flips drawn when there are too many recordings to enumerate them.
-const SIGN_FLIPS: usize = 100_000;
+pub const SIGN_FLIPS: usize = 100_000;
 
 /// One-sided p-value of the mean of `gains` under the sign-flip
 /// (randomisation) null: each recording's gain is as likely negative as
@@ -1058,6 +1058,13 @@ mod tests {
         assert!((s / 0.25 - 1.0).abs() < 0.03, "{s}");
     }
 
+    /// The pooled histogram, the recordings and their sparse cells.
+    type Simulated = (
+        SurvivalHistogram,
+        Vec<RecordingTrials>,
+        Vec<Vec<(u32, u32, u32)>>,
+    );
+
     /// Per-recording trials for the edge test: `g` recordings of true MOR
     /// log-uniform on `mor`, read with relative noise `noise`, 400 trials
     /// each on a thinning scene, kept with probability `keep(r, true MOR)`.
@@ -1068,11 +1075,7 @@ mod tests {
         noise: f64,
         keep: &dyn Fn(f64, f64) -> f64,
         seed: u64,
-    ) -> (
-        SurvivalHistogram,
-        Vec<RecordingTrials>,
-        Vec<Vec<(u32, u32, u32)>>,
-    ) {
+    ) -> Simulated {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let mut pooled = SurvivalHistogram::new(1, 0.01);
         let (mut recs, mut shares) = (Vec::new(), Vec::new());
@@ -1112,10 +1115,11 @@ mod tests {
     ) -> Result<EdgeEvidence, String> {
         let (pooled, recs, shares) = recordings(g, mor, noise, keep, seed);
         let remove = |i: usize, h: &mut SurvivalHistogram| h.add_cells(&shares[i], -1);
+        let one_class = 0..1;
         edge_test(
             &pooled,
             &recs,
-            &[0..1],
+            std::slice::from_ref(&one_class),
             &remove,
             &opts(EdgeShape::Probit),
             5,
@@ -1175,9 +1179,7 @@ mod tests {
         let p = sign_flip_p(&many, [3; 32]);
         assert_eq!(p, sign_flip_p(&many, [3; 32]));
         assert!(p < 2e-5, "{p}");
-        let mixed: Vec<f64> = (1..=25)
-            .map(|k| if k % 2 == 0 { -1.0 } else { 1.0 })
-            .collect();
+        let mixed: Vec<f64> = (1..=25).map(|k| (-1.0f64).powi(k)).collect();
         let p = sign_flip_p(&mixed, [3; 32]);
         assert!((0.3..0.7).contains(&p), "{p}");
     }

@@ -35,8 +35,11 @@ fn config(mor_noise: f64, one_slope: bool) -> GeneratorConfig {
     c
 }
 
+/// One band of one seed: (truth, slope, low, high, independent SE).
+type Row = (f64, f64, f64, f64, f64);
+
 /// Per seed and band: (truth, slope, low, high, independent SE).
-fn intervals(seed: u64, mor_noise: f64, one_slope: bool) -> Vec<(f64, f64, f64, f64, f64)> {
+fn intervals(seed: u64, mor_noise: f64, one_slope: bool) -> Vec<Row> {
     let cfg = config(mor_noise, one_slope);
     let generator = Generator::new(cfg.clone()).unwrap();
     let dir = tempfile::tempdir().unwrap();
@@ -85,7 +88,7 @@ struct Coverage {
 }
 
 fn coverage(seeds: std::ops::Range<u64>, mor_noise: f64, one_slope: bool) -> Coverage {
-    let mut all: Vec<Vec<(f64, f64, f64, f64, f64)>> = Vec::new();
+    let mut all: Vec<Vec<Row>> = Vec::new();
     for seed in seeds.clone() {
         let v = intervals(seed, mor_noise, one_slope);
         for (t, s, lo, hi, _) in &v {
