@@ -440,14 +440,18 @@ pub fn weather(
     };
     let alpha = p.edge_test_alpha();
     // Where the MORs spread less than the edge is wide, r/MOR and r cannot
-    // be told apart: the edge is then tested against constant survival.
+    // be told apart: the edge is then tested against constant survival —
+    // but only where r/MOR predicted the held-out recordings at least as
+    // well as range alone (a clear scene whose far returns flicker gets a
+    // very wide fitted edge, which beats a constant, while range alone
+    // beats it on every recording).
     let width = |i: usize| {
         ml.as_ref()
             .and_then(|m| m.bands.get(i))
             .and_then(|b| b.width)
             .unwrap_or(0.0)
     };
-    let narrow = |i: usize, e: &EdgeEvidence| e.mor_spread < width(i);
+    let narrow = |i: usize, e: &EdgeEvidence| e.mor_spread < width(i) && e.gain >= 0.0;
     let seen_in = |i: usize, e: &EdgeEvidence| {
         if narrow(i, e) {
             e.gain_constant > 0.0 && e.p_constant <= alpha

@@ -197,8 +197,10 @@ pub struct Interval {
 /// when the mean gain is positive and `p_value ≤ alpha`. Where the
 /// recordings' MORs spread less than the edge is wide (`mor_spread`, the
 /// standard deviation of `ln MOR`, below the fitted relative edge width),
-/// an edge in `r/MOR` cannot be told from one in `r`; the edge is then
-/// tested against survival that depends on nothing instead
+/// an edge in `r/MOR` cannot be told from one in `r`; if `r/MOR` still
+/// predicted the held-out recordings at least as well as range alone
+/// (mean gain ≥ 0), the edge is then tested against survival that depends
+/// on nothing instead
 /// (`gain_over_constant_nats_per_recording`, `p_value_over_constant`), and
 /// `basis` says which comparison decided.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
