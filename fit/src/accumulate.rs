@@ -63,6 +63,14 @@ pub struct RecordingRow {
     /// revolutions per scan. Near-range counts per revolution are
     /// `ghosts / revolutions`.
     pub revolutions: u64,
+    /// This recording's share of the survival histogram, sparse:
+    /// `(cell index of the histogram, kept, trials)` sorted by index. The
+    /// pooled histogram is the sum over recordings; intervals and the
+    /// held-out edge test resample or leave out whole recordings from it
+    /// (returns of one recording share its MOR reading and sensor state).
+    pub survival: Vec<(u32, u32, u32)>,
+    /// `ln(MOR · range_scale)` the recording's trials were binned with.
+    pub ln_mor_scaled: f64,
 }
 
 /// Resolution of the per-recording occluder histograms, metres.
@@ -82,6 +90,22 @@ impl RecordingRow {
             })
             .collect()
     }
+}
+
+/// Sorts sparse histogram cells by index and sums duplicates.
+fn merge_cells(mut v: Vec<(u32, u32, u32)>) -> Vec<(u32, u32, u32)> {
+    v.sort_unstable_by_key(|c| c.0);
+    let mut out: Vec<(u32, u32, u32)> = Vec::with_capacity(v.len());
+    for c in v {
+        match out.last_mut() {
+            Some(l) if l.0 == c.0 => {
+                l.1 += c.1;
+                l.2 += c.2;
+            }
+            _ => out.push(c),
+        }
+    }
+    out
 }
 
 /// Ghost or ring returns: distance and reflectivity histograms, and what
@@ -252,6 +276,7 @@ impl WeatherAcc {
         let ln_m = (mor * range_scale).ln();
         let mut kept = 0u64;
         let mut total = 0u64;
+        let mut own: Vec<(u32, u32, u32)> = Vec::with_capacity(cells.cells.len());
         let mut hidden = vec![0u32; 0];
         if !tally.occluded.is_empty() {
             hidden = vec![0u32; cells.n_cells];
@@ -272,6 +297,13 @@ impl WeatherAcc {
             let b = self.survival.bin_of(cells.ln_r[j] - ln_m);
             self.survival
                 .add(cells.class[j] as usize, b, k as u64, trials as u64);
+            if trials > 0 || k > 0 {
+                own.push((
+                    self.survival.index(cells.class[j] as usize, b) as u32,
+                    k as u32,
+                    trials as u32,
+                ));
+            }
             kept += k as u64;
             total += h as u64;
         }
@@ -301,6 +333,8 @@ impl WeatherAcc {
             rays,
             frames,
             revolutions: frames as u64 * cells.revolutions.max(1),
+            survival: merge_cells(own),
+            ln_mor_scaled: ln_m,
         });
     }
 

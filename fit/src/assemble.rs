@@ -1,8 +1,8 @@
 //! From accumulated statistics to the coefficient table (no I/O).
 
 use murk_types::{
-    CountLaw, Gaussian, MorBin, NoiseLaw, RainConversion, SlopeBand, SurvivalFit, SweepBand,
-    Uncertainty, WeatherClass, WeatherCoefficients,
+    CountLaw, EdgeTest, Gaussian, Interval, MorBin, NoiseLaw, RainConversion, SlopeBand,
+    SurvivalFit, SweepBand, Uncertainty, WeatherClass, WeatherCoefficients,
 };
 
 use crate::FitValidParams;
@@ -21,7 +21,8 @@ use crate::stats::truncnorm::{
     is_quantized,
 };
 use crate::survival::{
-    Partition, SurvivalOptions, SurvivalResult, fit_slope_only, fit_survival, precheck,
+    EdgeEvidence, Partition, RecordingTrials, RobustIntervals, SurvivalOptions, SurvivalResult,
+    edge_test, fit_slope_only, fit_survival, precheck, robust_covariance, robust_intervals,
 };
 
 /// Converts a bootstrap summary to the table's type.
@@ -392,6 +393,97 @@ pub fn weather(
         ml.as_ref()
             .and_then(|m| m.bands[i].slope.as_ref().ok().copied())
     };
+    // Each recording's share of the likelihood: intervals over recordings
+    // and the held-out test of the edge against range alone.
+    let classes: Vec<_> = bands.iter().map(|b| cx.partition.classes_in(b)).collect();
+    let per_recording: Vec<RecordingTrials> = acc
+        .rows
+        .iter()
+        .map(|r| RecordingTrials {
+            bands: classes
+                .iter()
+                .map(|c| acc.survival.cell_observations(&r.survival, c.clone()))
+                .collect(),
+            ln_mor_scaled: r.ln_mor_scaled,
+            mor: r.mor,
+        })
+        .collect();
+    let (robust, evidence) = match &ml {
+        Some(m) => {
+            let clusters: Vec<Vec<Vec<crate::survival::Obs>>> =
+                per_recording.iter().map(|r| r.bands.clone()).collect();
+            let remove = |g: usize, h: &mut crate::survival::SurvivalHistogram| {
+                h.add_cells(&acc.rows[g].survival, -1)
+            };
+            (
+                robust_intervals(
+                    m,
+                    robust_covariance(m, &clusters, &opts).as_ref(),
+                    &opts,
+                    bands.len(),
+                ),
+                edge_test(
+                    &acc.survival,
+                    &per_recording,
+                    &classes,
+                    &remove,
+                    &opts,
+                    p.edge_test_folds() as usize,
+                    murk_types::seed::derive(
+                        p.seed(),
+                        &murk_types::seed::key(&["edge-test", cx.class.name()]),
+                        murk_types::seed::Purpose::Bootstrap,
+                    )
+                    .bytes(),
+                ),
+            )
+        }
+        None => (RobustIntervals::default(), vec![]),
+    };
+    let interval = |[low, high]: [f64; 2]| Interval {
+        low,
+        high,
+        level: 0.95,
+        method: "cluster-robust over recordings".into(),
+    };
+    let alpha = p.edge_test_alpha();
+    // Where the MORs spread less than the edge is wide, r/MOR and r cannot
+    // be told apart: the edge is then tested against constant survival —
+    // but only where r/MOR predicted the held-out recordings at least as
+    // well as range alone (a clear scene whose far returns flicker gets a
+    // very wide fitted edge, which beats a constant, while range alone
+    // beats it on every recording).
+    let width = |i: usize| {
+        ml.as_ref()
+            .and_then(|m| m.bands.get(i))
+            .and_then(|b| b.width)
+            .unwrap_or(0.0)
+    };
+    let narrow = |i: usize, e: &EdgeEvidence| e.mor_spread < width(i) && e.gain >= 0.0;
+    let seen_in = |i: usize, e: &EdgeEvidence| {
+        if narrow(i, e) {
+            e.gain_constant > 0.0 && e.p_constant <= alpha
+        } else {
+            e.gain > 0.0 && e.p <= alpha
+        }
+    };
+    let edge_record = |i: usize, e: &EdgeEvidence| EdgeTest {
+        gain_nats_per_recording: e.gain,
+        recordings_better: e.better as u32,
+        recordings: e.recordings as u32,
+        p_value: e.p,
+        alpha,
+        gain_over_constant_nats_per_recording: e.gain_constant,
+        p_value_over_constant: e.p_constant,
+        mor_spread: e.mor_spread,
+        basis: if narrow(i, e) {
+            "edge against constant survival".into()
+        } else {
+            "r/MOR against range alone".into()
+        },
+        folds: p.edge_test_folds(),
+        edge_seen: seen_in(i, e),
+    };
 
     let vanishing_slope: Vec<SlopeBand> = bands
         .iter()
@@ -399,16 +491,72 @@ pub fn weather(
         .map(|(i, b)| {
             let trials: u64 = obs[i].iter().map(|o| o.total as u64).sum();
             match &ml {
-                Some(m) => SlopeBand {
-                    reflectivity_min: b.min,
-                    reflectivity_max: b.max,
-                    slope: m.bands[i].slope.as_ref().ok().copied(),
-                    points: trials,
-                    reason: m.bands[i].slope.as_ref().err().cloned(),
-                    std_error: m.bands[i].std_error,
-                    edge_width: m.bands[i].width,
-                    mor_bins: vec![],
-                },
+                Some(m) => {
+                    let test = evidence.get(i);
+                    let mut slope = m.bands[i].slope.clone();
+                    // Why the held-out test does not confirm the edge, if
+                    // it does not: the slope is nulled with it when
+                    // `require_edge` is on, kept with it as a warning
+                    // otherwise.
+                    let mut verdict: Result<(), String> = Ok(());
+                    if let (Ok(_), Some(t)) = (&slope, test) {
+                        match t {
+                            Ok(e) if seen_in(i, e) => {}
+                            Ok(e) if 0.5f64.powi(e.recordings as i32) > alpha => {
+                                verdict = Err(format!(
+                                    "no edge can be shown: too few recordings ({}) with returns in this band for the sign-flip test over recordings to reach its level {alpha} (it needs {})",
+                                    e.recordings,
+                                    (1.0 / alpha).log2().ceil()
+                                ))
+                            }
+                            Ok(e) if narrow(i, e) => {
+                                verdict = Err(format!(
+                                    "no edge: the MORs spread too little (sd of ln MOR {:.3} < edge width {:.3}) to tell r/MOR from range, and on held-out recordings the edge predicts survival no better than a constant (gain {:.3} nats per recording, sign-flip p {:.3} > {alpha})",
+                                    e.mor_spread,
+                                    width(i),
+                                    e.gain_constant,
+                                    e.p_constant
+                                ))
+                            }
+                            Ok(e) => {
+                                verdict = Err(format!(
+                                    "no edge: on held-out recordings survival by r/MOR predicts no better than survival by range alone (gain {:.3} nats per recording, better in {} of {} recordings, sign-flip p {:.3} > {alpha})",
+                                    e.gain, e.better, e.recordings, e.p
+                                ))
+                            }
+                            Err(why) => verdict = Err(format!("no edge can be shown: {why}")),
+                        }
+                    }
+                    let mut note = None;
+                    if let Err(v) = verdict {
+                        if p.require_edge() {
+                            slope = Err(v);
+                        } else {
+                            note = Some(format!(
+                                "slope kept although the held-out edge test does not confirm it (require_edge off): {v}"
+                            ));
+                        }
+                    }
+                    let seen = slope.is_ok();
+                    SlopeBand {
+                        reflectivity_min: b.min,
+                        reflectivity_max: b.max,
+                        slope: slope.as_ref().ok().copied(),
+                        points: trials,
+                        reason: slope.as_ref().err().cloned().or(note),
+                        std_error: robust.slopes[i].map(|r| r.0).filter(|_| seen),
+                        std_error_independent: m.bands[i].std_error.filter(|_| seen),
+                        ci95: robust.slopes[i]
+                            .filter(|_| seen)
+                            .map(|(_, ci)| interval(ci)),
+                        edge_test: test
+                            .and_then(|t| t.as_ref().ok())
+                            .map(|e| edge_record(i, e)),
+                        edge_width: m.bands[i].width,
+                        edge_width_ci95: robust.widths.get(i).copied().flatten().map(&interval),
+                        mor_bins: vec![],
+                    }
+                }
                 None => SlopeBand {
                     reflectivity_min: b.min,
                     reflectivity_max: b.max,
@@ -422,7 +570,11 @@ pub fn weather(
                             }),
                     ),
                     std_error: None,
+                    std_error_independent: None,
+                    ci95: None,
+                    edge_test: None,
                     edge_width: None,
+                    edge_width_ci95: None,
                     mor_bins: vec![],
                 },
             }
@@ -445,7 +597,11 @@ pub fn weather(
                 points: qs.iter().filter(|q| q.used).map(|q| q.points).sum(),
                 reason: slope.err(),
                 std_error: None,
+                std_error_independent: None,
+                ci95: None,
+                edge_test: None,
                 edge_width: None,
+                edge_width_ci95: None,
                 mor_bins: qs.iter().map(to_mor_bin).collect(),
             }
         })
@@ -458,13 +614,16 @@ pub fn weather(
     let all_q = band_quantiles(acc, &means, &all_cells, p, None, rs);
     let all_q99 = quantile_slope(&all_q, rs).ok();
 
-    // Figure 27: both estimators over the sweep bands.
+    // Figure 27: both estimators over the sweep bands; the ML one only
+    // where some band of the table showed an edge (it reuses that fit's
+    // width, ε and π, which describe no edge otherwise).
+    let edge_seen = vanishing_slope.iter().any(|b| b.slope.is_some());
     let reflectivity_sweep: Vec<SweepBand> = sweep
         .iter()
         .map(|b| {
             let o = band_obs(acc, cx.partition, b);
             let trials: u64 = o.iter().map(|x| x.total as u64).sum();
-            let slope = ml.as_ref().and_then(|m| {
+            let slope = ml.as_ref().filter(|_| edge_seen).and_then(|m| {
                 let w = m.bands.iter().find_map(|x| x.width)?;
                 fit_slope_only(
                     &o,
@@ -539,6 +698,7 @@ pub fn weather(
             edge: p.edge(),
             dropout: m.dropout,
             dropout_clear: cx.dropout_clear,
+            dropout_ci95: robust.dropout.map(&interval),
             residual: m.residual,
             neg_log_likelihood: m.nll,
             trials: m.trials,

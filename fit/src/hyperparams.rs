@@ -70,6 +70,9 @@ impl Band {
 /// | `edge` | probit | shape of the soft survival edge | probit, logistic |
 /// | `shared_edge_width` | true | one edge width for all bands (else one per band) | |
 /// | `free_dropout` | true | fit the dropout ε per weather (else fix it to the clear-weather value) | |
+/// | `edge_test_folds` | 5 | folds over recordings of the held-out test of the edge model against survival by range alone (a slope is reported only when the edge predicts held-out recordings better) | 2–50 |
+/// | `require_edge` | false | report a slope only where the held-out edge test sees an edge (false: the test still runs and is recorded in `edge_test`, and a slope it does not confirm is kept with a warning in the band's `reason`). Off by default: its no-weather model (survival by range alone, pooled over the weather's recordings) learns the scene's own per-point flicker on a static real scene and then out-predicts a true edge (measured: the low band nulled on 3 of 3 semi-real campaigns with a known edge); it needs a no-weather model from the clear recordings first | |
+/// | `edge_test_alpha` | 0.01 | level of the one-sided sign-flip test of the held-out gains over recordings (an edge needs at least ⌈log₂(1/α)⌉ recordings: 7 at 1 %) | (0, 0.5] |
 /// | `survival_log_step` | 0.01 | bin width of ln(r / MOR) in the survival histogram (1 % in range: far finer than any edge or slope the data resolve) | (0, 0.1] |
 /// | `reflectivity_floor` | 0 | lower truncation of the ghost/ring reflectivity laws | finite |
 /// | `count_mor_ref_m` | 100 | reference MOR of the count-per-scan power law, metres | > 0 |
@@ -100,6 +103,9 @@ pub struct FitValidParams {
     pub(crate) edge: EdgeShape,
     pub(crate) shared_edge_width: bool,
     pub(crate) free_dropout: bool,
+    pub(crate) edge_test_folds: u32,
+    pub(crate) require_edge: bool,
+    pub(crate) edge_test_alpha: f64,
     pub(crate) survival_log_step: f64,
     pub(crate) reflectivity_floor: f64,
     pub(crate) count_mor_ref_m: f64,
@@ -129,6 +135,9 @@ impl Default for FitParams {
             edge: EdgeShape::Probit,
             shared_edge_width: true,
             free_dropout: true,
+            edge_test_folds: 5,
+            require_edge: false,
+            edge_test_alpha: 0.01,
             survival_log_step: 0.01,
             reflectivity_floor: 0.0,
             count_mor_ref_m: 100.0,
@@ -190,6 +199,12 @@ impl FitParams {
         shared_edge_width: bool);
     setter!(/// Sets `free_dropout`.
         free_dropout: bool);
+    setter!(/// Sets `edge_test_folds`.
+        edge_test_folds: u32);
+    setter!(/// Sets `require_edge`.
+        require_edge: bool);
+    setter!(/// Sets `edge_test_alpha`.
+        edge_test_alpha: f64);
     setter!(/// Sets `survival_log_step`.
         survival_log_step: f64);
     setter!(/// Sets `reflectivity_floor`.
@@ -297,6 +312,20 @@ impl FitParams {
                 "must lie in [0, 1)",
             );
         }
+        if !(2..=50).contains(&p.edge_test_folds) {
+            return bad(
+                "edge_test_folds",
+                p.edge_test_folds.to_string(),
+                "must lie in 2–50",
+            );
+        }
+        if !(p.edge_test_alpha > 0.0 && p.edge_test_alpha <= 0.5) {
+            return bad(
+                "edge_test_alpha",
+                p.edge_test_alpha.to_string(),
+                "must lie in (0, 0.5]",
+            );
+        }
         if !(p.survival_log_step > 0.0 && p.survival_log_step <= 0.1) {
             return bad(
                 "survival_log_step",
@@ -402,6 +431,21 @@ impl FitValidParams {
     pub fn free_dropout(&self) -> bool {
         self.free_dropout
     }
+    /// `edge_test_folds`.
+    pub fn edge_test_folds(&self) -> u32 {
+        self.edge_test_folds
+    }
+
+    /// `require_edge`.
+    pub fn require_edge(&self) -> bool {
+        self.require_edge
+    }
+
+    /// `edge_test_alpha`.
+    pub fn edge_test_alpha(&self) -> f64 {
+        self.edge_test_alpha
+    }
+
     /// Survival histogram resolution in ln(r/MOR).
     pub fn survival_log_step(&self) -> f64 {
         self.survival_log_step

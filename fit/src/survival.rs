@@ -151,6 +151,46 @@ impl SurvivalHistogram {
     pub fn classes(&self) -> usize {
         self.classes
     }
+
+    /// The flat index of `(class, bin)`, as kept in a recording's sparse
+    /// share of the histogram.
+    #[inline]
+    pub fn index(&self, class: usize, bin: usize) -> usize {
+        class * self.bins + bin
+    }
+
+    /// Adds (`sign` = +1) or removes (−1) a sparse share of the histogram:
+    /// `(index, kept, trials)` cells as [`SurvivalHistogram::index`] gives.
+    pub fn add_cells(&mut self, cells: &[(u32, u32, u32)], sign: i64) {
+        for &(i, k, n) in cells {
+            let i = i as usize;
+            self.kept[i] = (self.kept[i] as i64 + sign * k as i64) as u64;
+            self.total[i] = (self.total[i] as i64 + sign * n as i64) as u64;
+        }
+    }
+
+    /// The observations of a sparse share, summed over the classes in
+    /// `classes`, in bin order.
+    pub fn cell_observations(&self, cells: &[(u32, u32, u32)], classes: Range<usize>) -> Vec<Obs> {
+        let mut by_bin: std::collections::BTreeMap<usize, (f64, f64)> = Default::default();
+        for &(i, k, n) in cells {
+            let (c, b) = (i as usize / self.bins, i as usize % self.bins);
+            if classes.contains(&c) {
+                let e = by_bin.entry(b).or_default();
+                e.0 += k as f64;
+                e.1 += n as f64;
+            }
+        }
+        by_bin
+            .into_iter()
+            .filter(|(_, (_, n))| *n > 0.0)
+            .map(|(b, (k, n))| Obs {
+                u: (self.ln_u0 + (b as f64 + 0.5) * self.step).exp(),
+                kept: k,
+                total: n,
+            })
+            .collect()
+    }
 }
 
 /// One histogram bin: `total` trials at `u`, `kept` survived.
@@ -207,6 +247,14 @@ pub struct SurvivalResult {
     pub nll: f64,
     /// Trials in the likelihood.
     pub trials: u64,
+    /// The optimum in the fit's internal parameters (log slopes of the
+    /// fitted bands, log widths, logit ε when free, then π's parameter).
+    pub theta: Vec<f64>,
+    /// The fitted bands (indices into the input), in `theta` order.
+    pub active: Vec<usize>,
+    /// Inverse observed information over `theta` without π's parameter
+    /// (the "bread" of the cluster-robust sandwich), when invertible.
+    pub inverse_information: Option<Vec<Vec<f64>>>,
 }
 
 /// `(1 − F(z), F(z))` of the shared edge law, each accurate in its own tail.
@@ -362,21 +410,7 @@ pub fn fit_survival(bands: &[Vec<Obs>], opts: &SurvivalOptions) -> Option<Surviv
             ((lo.max(1e-4) / 10.0).ln(), (hi * 10.0).ln())
         })
         .collect();
-    let nll = |t: &[f64]| {
-        let (eps, pi) = layout.eps_pi(t, opts.fixed_dropout);
-        let mut s = 0.0;
-        for (j, &i) in layout.active.iter().enumerate() {
-            if t[j] < bounds[j].0 || t[j] > bounds[j].1 {
-                return INVALID;
-            }
-            let w = layout.width_of(t, j);
-            if !(1e-4..=5.0).contains(&w) {
-                return INVALID;
-            }
-            s += band_nll(&bands[i], opts.edge, t[j].exp(), w, eps, pi);
-        }
-        s
-    };
+    let nll = |t: &[f64]| joint_nll(bands, &layout, opts, Some(&bounds), t);
     let mut steps = vec![0.1; active.len()];
     steps.extend(std::iter::repeat_n(0.5, layout.n_width()));
     if layout.free_eps {
@@ -401,6 +435,7 @@ pub fn fit_survival(bands: &[Vec<Obs>], opts: &SurvivalOptions) -> Option<Surviv
     };
     let h: Vec<f64> = vec![1e-4; n_free];
     let cov = invert(&hessian(&sub, &theta[..n_free], &h));
+    let inverse_information = cov.clone();
     for (j, &i) in active.iter().enumerate() {
         let s = theta[j].exp();
         let w = layout.width_of(&theta, j);
@@ -430,7 +465,453 @@ pub fn fit_survival(bands: &[Vec<Obs>], opts: &SurvivalOptions) -> Option<Surviv
         residual: pi,
         nll: m.cost,
         trials: active.iter().map(|&i| trials[i]).sum(),
+        theta,
+        active,
+        inverse_information,
     })
+}
+
+/// The joint negative log-likelihood of `bands` at internal parameters `t`
+/// (`INVALID` outside `bounds`, when given, or outside the width range).
+fn joint_nll(
+    bands: &[Vec<Obs>],
+    layout: &Layout,
+    opts: &SurvivalOptions,
+    bounds: Option<&[(f64, f64)]>,
+    t: &[f64],
+) -> f64 {
+    let (eps, pi) = layout.eps_pi(t, opts.fixed_dropout);
+    let mut s = 0.0;
+    for (j, &i) in layout.active.iter().enumerate() {
+        if let Some(b) = bounds
+            && (t[j] < b[j].0 || t[j] > b[j].1)
+        {
+            return INVALID;
+        }
+        let w = layout.width_of(t, j);
+        if !(1e-4..=5.0).contains(&w) {
+            return INVALID;
+        }
+        s += band_nll(&bands[i], opts.edge, t[j].exp(), w, eps, pi);
+    }
+    s
+}
+
+impl SurvivalResult {
+    fn layout(&self, opts: &SurvivalOptions) -> Layout {
+        Layout {
+            active: self.active.clone(),
+            shared: opts.shared_width,
+            free_eps: opts.fixed_dropout.is_none(),
+        }
+    }
+
+    /// The probability that a trial at `u` in band `band` is kept under the
+    /// fitted model, `None` for a band that was not fitted.
+    pub fn keep_probability(&self, opts: &SurvivalOptions, band: usize, u: f64) -> Option<f64> {
+        let layout = self.layout(opts);
+        let j = self.active.iter().position(|&i| i == band)?;
+        let s = self.theta[j].exp();
+        let w = layout.width_of(&self.theta, j);
+        let z = (u - s) / (w * s);
+        Some(opts.edge.keep_probability(z, self.dropout, self.residual))
+    }
+}
+
+/// The cluster-robust ("sandwich") covariance of the fit's free internal
+/// parameters over recordings: `A·B·A · G/(G−1)` with `A` the inverse
+/// observed information and `B = Σ_g s_g s_gᵀ` the outer products of the
+/// score of each recording `g` at the optimum (`clusters[g][band]` are its
+/// observations). Returns of one recording share its MOR reading and
+/// sensor state, so they are not independent trials: this covariance is as
+/// large as the spread between recordings makes it, however many returns
+/// each has. `None` with fewer than two recordings or a singular
+/// information.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RobustCovariance {
+    /// Covariance over `theta` without π's parameter.
+    pub v: Vec<Vec<f64>>,
+    /// Recordings (clusters).
+    pub clusters: usize,
+}
+
+/// The 95 % intervals over recordings of one survival fit (see
+/// [`robust_intervals`]).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct RobustIntervals {
+    /// Per input band: the slope's standard error (delta method) and 95 %
+    /// interval.
+    pub slopes: Vec<Option<(f64, [f64; 2])>>,
+    /// Per input band: the edge width's 95 % interval.
+    pub widths: Vec<Option<[f64; 2]>>,
+    /// The dropout's 95 % interval, when it was fitted.
+    pub dropout: Option<[f64; 2]>,
+}
+
+/// See [`RobustCovariance`].
+pub fn robust_covariance(
+    result: &SurvivalResult,
+    clusters: &[Vec<Vec<Obs>>],
+    opts: &SurvivalOptions,
+) -> Option<RobustCovariance> {
+    let a = result.inverse_information.as_ref()?;
+    let g_n = clusters.len();
+    if g_n < 2 {
+        return None;
+    }
+    let layout = result.layout(opts);
+    let n_free = a.len();
+    let theta = &result.theta;
+    let h = 1e-5;
+    let mut meat = vec![vec![0.0; n_free]; n_free];
+    for c in clusters {
+        let mut g = vec![0.0; n_free];
+        for (k, gk) in g.iter_mut().enumerate() {
+            let mut tp = theta.clone();
+            let mut tm = theta.clone();
+            tp[k] += h;
+            tm[k] -= h;
+            let fp = joint_nll(c, &layout, opts, None, &tp);
+            let fm = joint_nll(c, &layout, opts, None, &tm);
+            *gk = (fp - fm) / (2.0 * h);
+        }
+        for i in 0..n_free {
+            for j in 0..n_free {
+                meat[i][j] += g[i] * g[j];
+            }
+        }
+    }
+    let corr = g_n as f64 / (g_n as f64 - 1.0);
+    let mut v = vec![vec![0.0; n_free]; n_free];
+    for (i, vi) in v.iter_mut().enumerate() {
+        for (j, vij) in vi.iter_mut().enumerate() {
+            let mut x = 0.0;
+            for p in 0..n_free {
+                for q in 0..n_free {
+                    x += a[i][p] * meat[p][q] * a[q][j];
+                }
+            }
+            *vij = x * corr;
+        }
+    }
+    Some(RobustCovariance { v, clusters: g_n })
+}
+
+/// The 95 % intervals over recordings of the slopes (`s · exp(±t·se(ln s))`),
+/// edge widths (likewise in `ln w`) and the dropout (in `logit ε`), `t` the
+/// 97.5 % quantile of Student's t with `G − 1` degrees of freedom (the usual
+/// small-sample reference of a sandwich with `G` clusters). `n_bands`
+/// entries per band list; `None` where a band was not fitted or its
+/// variance is not positive.
+pub fn robust_intervals(
+    result: &SurvivalResult,
+    cov: Option<&RobustCovariance>,
+    opts: &SurvivalOptions,
+    n_bands: usize,
+) -> RobustIntervals {
+    let n = n_bands.max(result.bands.len());
+    let mut out = RobustIntervals {
+        slopes: vec![None; n],
+        widths: vec![None; n],
+        dropout: None,
+    };
+    let Some(cov) = cov else {
+        return out;
+    };
+    let t = student_t_975(cov.clusters as f64 - 1.0);
+    let sd = |k: usize| {
+        cov.v
+            .get(k)
+            .and_then(|r| r.get(k))
+            .copied()
+            .filter(|x| x.is_finite() && *x > 0.0)
+            .map(f64::sqrt)
+    };
+    let layout = result.layout(opts);
+    let theta = &result.theta;
+    for (j, &band) in result.active.iter().enumerate() {
+        if let Some(se) = sd(j) {
+            let s = theta[j].exp();
+            out.slopes[band] = Some((s * se, [s * (-t * se).exp(), s * (t * se).exp()]));
+        }
+        let k = result.active.len() + if layout.shared { 0 } else { j };
+        if let Some(se) = sd(k) {
+            let w = theta[k].exp();
+            out.widths[band] = Some([w * (-t * se).exp(), w * (t * se).exp()]);
+        }
+    }
+    if layout.free_eps {
+        let k = result.active.len() + layout.n_width();
+        if let Some(se) = sd(k) {
+            out.dropout = Some([sigmoid(theta[k] - t * se), sigmoid(theta[k] + t * se)]);
+        }
+    }
+    out
+}
+
+/// The 97.5 % quantile of Student's t with `nu` degrees of freedom
+/// (Cornish–Fisher expansion, Abramowitz & Stegun 26.7.5: within 0.2 % for
+/// `nu ≥ 3`; 1.96 in the limit).
+pub fn student_t_975(nu: f64) -> f64 {
+    let z: f64 = 1.959_963_984_540_054;
+    let nu = nu.max(1.0);
+    let (z3, z5, z7, z9) = (z.powi(3), z.powi(5), z.powi(7), z.powi(9));
+    z + (z3 + z) / (4.0 * nu)
+        + (5.0 * z5 + 16.0 * z3 + 3.0 * z) / (96.0 * nu.powi(2))
+        + (3.0 * z7 + 19.0 * z5 + 17.0 * z3 - 15.0 * z) / (384.0 * nu.powi(3))
+        + (79.0 * z9 + 776.0 * z7 + 1482.0 * z5 - 1920.0 * z3 - 945.0 * z) / (92_160.0 * nu.powi(4))
+}
+
+/// Held-out evidence that survival follows an edge in `r/MOR` rather than
+/// range alone (see [`edge_test`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EdgeEvidence {
+    /// Mean held-out log-likelihood gain of the edge model over survival
+    /// by range alone, nats per recording.
+    pub gain: f64,
+    /// One-sided sign-flip p-value of the mean gain (see [`sign_flip_p`]).
+    pub p: f64,
+    /// Recordings with trials in the band.
+    pub recordings: usize,
+    /// Recordings whose gain is positive.
+    pub better: usize,
+    /// Mean held-out gain of the edge model over survival that depends on
+    /// nothing (the training folds' pooled keep rate), nats per recording.
+    pub gain_constant: f64,
+    /// Its one-sided sign-flip p-value.
+    pub p_constant: f64,
+    /// Standard deviation of `ln MOR` over the recordings with trials in
+    /// the band: how far their MORs spread, relatively.
+    pub mor_spread: f64,
+}
+
+/// Sign flips drawn when there are too many recordings to enumerate them.
+pub const SIGN_FLIPS: usize = 100_000;
+
+/// One-sided p-value of the mean of `gains` under the sign-flip
+/// (randomisation) null: each recording's gain is as likely negative as
+/// positive. Exact (all `2ⁿ` sign patterns, in Gray-code order) up to 20
+/// gains; beyond, [`SIGN_FLIPS`] patterns drawn from `seed`, `(1 + hits) /
+/// (1 + draws)`. The smallest p-value n gains can give is `2⁻ⁿ`.
+///
+/// Unlike a z over recordings it does not assume a normal mean: the gains
+/// of an edge are skewed (a few recordings whose MOR puts the edge amid the
+/// scene gain hundreds of nats, those whose edge lies beyond it almost
+/// none), and a z then misses an edge every recording agrees on.
+pub fn sign_flip_p(gains: &[f64], seed: [u8; 32]) -> f64 {
+    let n = gains.len();
+    if n == 0 {
+        return 1.0;
+    }
+    let observed: f64 = gains.iter().sum();
+    let scale: f64 = gains
+        .iter()
+        .map(|g| g.abs())
+        .sum::<f64>()
+        .max(f64::MIN_POSITIVE);
+    let tie = 1e-12 * scale;
+    if n <= 20 {
+        // Gray code: pattern k differs from k − 1 in bit trailing_zeros(k).
+        let mut signs = vec![1.0f64; n];
+        let mut sum = observed;
+        let mut hits: u64 = 1;
+        for k in 1u64..(1u64 << n) {
+            let i = k.trailing_zeros() as usize;
+            sum -= 2.0 * signs[i] * gains[i];
+            signs[i] = -signs[i];
+            hits += u64::from(sum >= observed - tie);
+        }
+        hits as f64 / (1u64 << n) as f64
+    } else {
+        use rand::{RngExt, SeedableRng, rngs::ChaCha8Rng};
+        let mut rng = ChaCha8Rng::from_seed(seed);
+        let mut hits = 0usize;
+        for _ in 0..SIGN_FLIPS {
+            let mut sum = 0.0;
+            for g in gains {
+                sum += if rng.random_bool(0.5) { *g } else { -*g };
+            }
+            hits += usize::from(sum >= observed - tie);
+        }
+        (1 + hits) as f64 / (1 + SIGN_FLIPS) as f64
+    }
+}
+
+/// Width of the range bins of the no-weather model, in `ln r` (5 %).
+pub const RANGE_ONLY_STEP: f64 = 0.05;
+
+/// One recording's trials for [`edge_test`]: per band its observations, and
+/// the `ln(MOR · range_scale)` they were binned with.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecordingTrials {
+    /// Per band, the recording's observations.
+    pub bands: Vec<Vec<Obs>>,
+    /// `ln(MOR · range_scale)`.
+    pub ln_mor_scaled: f64,
+    /// Its MOR (orders the folds).
+    pub mor: f64,
+}
+
+/// Tests, per band, the edge model against the no-weather model by
+/// predicting held-out recordings.
+///
+/// Each recording is also scored against survival that depends on nothing
+/// (the training folds' pooled keep rate): where the MORs spread less than
+/// the edge is wide, an edge in `r/MOR` and one in `r` cannot be told apart,
+/// and the caller may fall back on that comparison (see the fit's
+/// `edge_test`).
+///
+/// The no-weather model lets survival depend on range alone, in bins of
+/// [`RANGE_ONLY_STEP`] in `ln r` (so range-dependent clear dropout, a scene
+/// whose far returns flicker, or a sensor whose far returns fade, all belong
+/// to it); the edge model makes it depend on `r/MOR`. Recordings are split
+/// into `folds` folds (interleaved in MOR order); each fold is predicted by
+/// both models fitted without it, and the per-recording difference of the
+/// held-out log-likelihoods is tested over recordings with a one-sided
+/// sign-flip test ([`sign_flip_p`]; `seed` draws its flips beyond 20
+/// recordings).
+/// A likelihood-ratio test of the nested models would need its reference
+/// distribution worked out — under "no edge" the slope is not identified
+/// and the width and π sit at a boundary, so the χ² law does not hold — and
+/// it would still treat the returns of one recording as independent; the
+/// held-out comparison over recordings needs neither.
+///
+/// `pooled` is the histogram of all recordings and `remove(g, h)` takes
+/// recording `g`'s share out of a copy `h`. Returns per band the evidence,
+/// or why there is none.
+pub fn edge_test(
+    pooled: &SurvivalHistogram,
+    recordings: &[RecordingTrials],
+    band_classes: &[Range<usize>],
+    remove: &dyn Fn(usize, &mut SurvivalHistogram),
+    opts: &SurvivalOptions,
+    folds: usize,
+    seed: [u8; 32],
+) -> Vec<Result<EdgeEvidence, String>> {
+    let n_b = band_classes.len();
+    let g_n = recordings.len();
+    if g_n < folds.max(3) {
+        return vec![
+            Err(format!(
+                "too few recordings ({g_n}) to test the edge on held-out recordings"
+            ));
+            n_b
+        ];
+    }
+    let mut order: Vec<usize> = (0..g_n).collect();
+    order.sort_by(|&a, &b| {
+        recordings[a]
+            .mor
+            .total_cmp(&recordings[b].mor)
+            .then(a.cmp(&b))
+    });
+    let mut fold_of = vec![0usize; g_n];
+    for (rank, &g) in order.iter().enumerate() {
+        fold_of[g] = rank % folds;
+    }
+    // Range-only tables: per band, ln r bin → (kept, trials), all recordings.
+    type Table = std::collections::BTreeMap<i64, (f64, f64)>;
+    let key = |o: &Obs, lnm: f64| ((o.u.ln() + lnm) / RANGE_ONLY_STEP).floor() as i64;
+    let add_to = |t: &mut Table, r: &RecordingTrials, b: usize, sign: f64| {
+        for o in &r.bands[b] {
+            let e = t.entry(key(o, r.ln_mor_scaled)).or_default();
+            e.0 += sign * o.kept;
+            e.1 += sign * o.total;
+        }
+    };
+    let mut all: Vec<Table> = vec![Table::new(); n_b];
+    for r in recordings {
+        for (b, t) in all.iter_mut().enumerate() {
+            add_to(t, r, b, 1.0);
+        }
+    }
+    let mut gains: Vec<Vec<f64>> = vec![Vec::new(); n_b];
+    let mut gains_constant: Vec<Vec<f64>> = vec![Vec::new(); n_b];
+    let mut ln_mors: Vec<Vec<f64>> = vec![Vec::new(); n_b];
+    let mut failed: Vec<Option<String>> = vec![None; n_b];
+    let lp = |p: f64| p.clamp(1e-12, 1.0 - 1e-12);
+    for f in 0..folds {
+        let mut train = pooled.clone();
+        for g in (0..g_n).filter(|&g| fold_of[g] == f) {
+            remove(g, &mut train);
+        }
+        let obs: Vec<Vec<Obs>> = band_classes
+            .iter()
+            .map(|c| train.observations(c.clone()))
+            .collect();
+        let fit = fit_survival(&obs, opts);
+        for b in 0..n_b {
+            let mut table = all[b].clone();
+            for g in (0..g_n).filter(|&g| fold_of[g] == f) {
+                add_to(&mut table, &recordings[g], b, -1.0);
+            }
+            let (kk, nn) = table
+                .values()
+                .fold((0.0, 0.0), |a, v| (a.0 + v.0, a.1 + v.1));
+            for g in (0..g_n).filter(|&g| fold_of[g] == f) {
+                let r = &recordings[g];
+                if r.bands[b].is_empty() {
+                    continue;
+                }
+                let mut d = 0.0;
+                let mut dc = 0.0;
+                let pc = lp((kk + 0.5) / (nn + 1.0));
+                for o in &r.bands[b] {
+                    let Some(pe) = fit.as_ref().and_then(|m| m.keep_probability(opts, b, o.u))
+                    else {
+                        failed[b].get_or_insert_with(|| {
+                            "the edge could not be fitted with a fold of recordings left out"
+                                .to_string()
+                        });
+                        break;
+                    };
+                    let (k, n) = table
+                        .get(&key(o, r.ln_mor_scaled))
+                        .copied()
+                        .filter(|v| v.1 > 0.0)
+                        .unwrap_or((kk, nn));
+                    let pr = lp((k + 0.5) / (n + 1.0));
+                    let pe = lp(pe);
+                    d += o.kept * (pe / pr).ln()
+                        + (o.total - o.kept) * ((1.0 - pe) / (1.0 - pr)).ln();
+                    dc += o.kept * (pe / pc).ln()
+                        + (o.total - o.kept) * ((1.0 - pe) / (1.0 - pc)).ln();
+                }
+                gains[b].push(d);
+                gains_constant[b].push(dc);
+                ln_mors[b].push(r.mor.ln());
+            }
+        }
+    }
+    (0..n_b)
+        .map(|b| {
+            if let Some(e) = &failed[b] {
+                return Err(e.clone());
+            }
+            let g = &gains[b];
+            let n = g.len();
+            if n < 3 {
+                return Err(format!(
+                    "too few recordings with returns in this band ({n}) to test the edge"
+                ));
+            }
+            let mean = g.iter().sum::<f64>() / n as f64;
+            let gc = &gains_constant[b];
+            let lm = &ln_mors[b];
+            let lm_mean = lm.iter().sum::<f64>() / n as f64;
+            Ok(EdgeEvidence {
+                gain: mean,
+                p: sign_flip_p(g, seed),
+                recordings: n,
+                better: g.iter().filter(|x| **x > 0.0).count(),
+                gain_constant: gc.iter().sum::<f64>() / n as f64,
+                p_constant: sign_flip_p(gc, seed),
+                mor_spread: (lm.iter().map(|x| (x - lm_mean).powi(2)).sum::<f64>()
+                    / (n as f64 - 1.0))
+                    .sqrt(),
+            })
+        })
+        .collect()
 }
 
 /// Fits one band's slope with the edge width, ε and π held at `fixed`'s
@@ -575,6 +1056,140 @@ mod tests {
         let bands = simulate(&truth, 0.05, 0.01, EdgeShape::Probit, 14);
         let s = fit_slope_only(&bands[0], EdgeShape::Probit, 0.05, 0.01, 0.0, 100, 10).unwrap();
         assert!((s / 0.25 - 1.0).abs() < 0.03, "{s}");
+    }
+
+    /// The pooled histogram, the recordings and their sparse cells.
+    type Simulated = (
+        SurvivalHistogram,
+        Vec<RecordingTrials>,
+        Vec<Vec<(u32, u32, u32)>>,
+    );
+
+    /// Per-recording trials for the edge test: `g` recordings of true MOR
+    /// log-uniform on `mor`, read with relative noise `noise`, 400 trials
+    /// each on a thinning scene, kept with probability `keep(r, true MOR)`.
+    /// Returns the pooled histogram, the recordings and their sparse cells.
+    fn recordings(
+        g: usize,
+        mor: [f64; 2],
+        noise: f64,
+        keep: &dyn Fn(f64, f64) -> f64,
+        seed: u64,
+    ) -> Simulated {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let mut pooled = SurvivalHistogram::new(1, 0.01);
+        let (mut recs, mut shares) = (Vec::new(), Vec::new());
+        for _ in 0..g {
+            let m = (mor[0].ln() + (mor[1] / mor[0]).ln() * rng.random_range(0.0..1.0)).exp();
+            // A uniform of the same variance as N(0, noise²).
+            let read = m * (1.0 + noise * 3f64.sqrt() * rng.random_range(-1.0..1.0));
+            let mut own = SurvivalHistogram::new(1, 0.01);
+            for _ in 0..400 {
+                let v: f64 = rng.random_range(0.0..1.0);
+                let r = 1.0 / (1.0 - v * (1.0 - 1.0 / 80.0));
+                let kept = rng.random_range(0.0..1.0) < keep(r, m);
+                let b = own.bin_of((r / read).ln());
+                own.add(0, b, kept as u64, 1);
+            }
+            pooled.merge(&own);
+            let cells: Vec<(u32, u32, u32)> = (0..own.bins)
+                .filter(|&b| own.total[b] > 0)
+                .map(|b| (b as u32, own.kept[b] as u32, own.total[b] as u32))
+                .collect();
+            recs.push(RecordingTrials {
+                bands: vec![pooled.cell_observations(&cells, 0..1)],
+                ln_mor_scaled: read.ln(),
+                mor: read,
+            });
+            shares.push(cells);
+        }
+        (pooled, recs, shares)
+    }
+
+    fn evidence(
+        g: usize,
+        mor: [f64; 2],
+        noise: f64,
+        keep: &dyn Fn(f64, f64) -> f64,
+        seed: u64,
+    ) -> Result<EdgeEvidence, String> {
+        let (pooled, recs, shares) = recordings(g, mor, noise, keep, seed);
+        let remove = |i: usize, h: &mut SurvivalHistogram| h.add_cells(&shares[i], -1);
+        let one_class = 0..1;
+        edge_test(
+            &pooled,
+            &recs,
+            std::slice::from_ref(&one_class),
+            &remove,
+            &opts(EdgeShape::Probit),
+            5,
+            [7; 32],
+        )
+        .pop()
+        .unwrap()
+    }
+
+    #[test]
+    fn edge_test_sees_an_edge_that_scales_with_mor() {
+        // Hard edge at 0.3·MOR, MOR 30–400 read with 3 % noise.
+        let hard = |r: f64, m: f64| if r < 0.3 * m { 0.99 } else { 0.0 };
+        for seed in 0..3 {
+            let e = evidence(40, [30.0, 400.0], 0.03, &hard, seed).unwrap();
+            assert!(e.p <= 0.01 && e.gain > 0.0, "seed {seed}: {e:?}");
+        }
+    }
+
+    #[test]
+    fn edge_test_sees_a_hard_edge_over_a_narrow_mor_range() {
+        // Rain of the seed: MOR 130–158 m (what its rain rates give).
+        let hard = |r: f64, m: f64| if r < 0.157 * m { 0.99 } else { 0.0 };
+        for seed in 0..3 {
+            let e = evidence(28, [130.0, 158.0], 0.03, &hard, seed).unwrap();
+            assert!(e.p <= 0.01 && e.gain > 0.0, "seed {seed}: {e:?}");
+        }
+    }
+
+    #[test]
+    fn edge_test_sees_no_edge_in_range_dependent_clear_dropout() {
+        // No weather; far returns flicker (keep 0.95 near, 0.6 at 80 m).
+        let flicker = |r: f64, _m: f64| 0.95 - 0.35 * (r / 80.0);
+        for seed in 0..5 {
+            match evidence(40, [9.0, 390.0], 0.03, &flicker, seed) {
+                Ok(e) => assert!(e.p > 0.01 || e.gain <= 0.0, "seed {seed}: {e:?}"),
+                Err(why) => eprintln!("seed {seed}: {why}"),
+            }
+        }
+    }
+
+    #[test]
+    fn sign_flip_p_is_exact_on_small_samples_and_seeded_beyond() {
+        let all = [0.5, 3.0, 900.0, 1.0, 20.0, 7.0, 0.1, 40.0, 2.0, 300.0];
+        assert_eq!(sign_flip_p(&all, [0; 32]), 1.0 / 1024.0);
+        // The smallest gain negative: only the patterns that flip nothing
+        // else reach the observed sum.
+        let mut one = all;
+        one[6] = -0.1;
+        assert_eq!(sign_flip_p(&one, [0; 32]), 2.0 / 1024.0);
+        // A sum of zero: half the patterns (and the ties) reach it.
+        let sym = [1.0, -1.0, 2.0, -2.0];
+        assert!((sign_flip_p(&sym, [0; 32]) - 10.0 / 16.0).abs() < 1e-12);
+        // Beyond 20 gains: seeded, reproducible, and near its exact value
+        // (all positive: 2⁻²⁵, so the resolution floor 1/100 001).
+        let many: Vec<f64> = (1..=25).map(f64::from).collect();
+        let p = sign_flip_p(&many, [3; 32]);
+        assert_eq!(p, sign_flip_p(&many, [3; 32]));
+        assert!(p < 2e-5, "{p}");
+        let mixed: Vec<f64> = (1..=25).map(|k| (-1.0f64).powi(k)).collect();
+        let p = sign_flip_p(&mixed, [3; 32]);
+        assert!((0.3..0.7).contains(&p), "{p}");
+    }
+
+    #[test]
+    fn student_t_quantile_matches_its_table() {
+        for (nu, t) in [(3.0, 3.182), (5.0, 2.571), (10.0, 2.228), (30.0, 2.042)] {
+            assert!((student_t_975(nu) / t - 1.0).abs() < 2e-3, "{nu}");
+        }
+        assert!((student_t_975(1e9) - 1.96).abs() < 1e-3);
     }
 
     #[test]

@@ -426,6 +426,45 @@ fn round_trip_generator_fit_apply_matches_the_degraded_recordings_in_fog_rain_an
             recordings.len() >= min_recordings,
             "{class}: {recordings:?}"
         );
+        // Too few recordings for the held-out edge test over recordings
+        // (one-sided at 1 %: 7 are needed) leave the slope null with the
+        // reason (issue #12), and apply refuses that weather naming it.
+        let fitted: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(&table).unwrap()).unwrap();
+        let bands = fitted["weathers"][class]["vanishing_slope"]
+            .as_array()
+            .unwrap()
+            .clone();
+        if let Some(b) = bands.iter().find(|b| b["slope"].is_null()) {
+            let reason = b["reason"].as_str().unwrap_or_default();
+            assert!(
+                recordings.len() < 7 && reason.contains("too few recordings"),
+                "{class}: {} recordings, null slope: {reason}",
+                recordings.len()
+            );
+            let o = murk(&[
+                "apply",
+                "--coefficients",
+                table.to_str().unwrap(),
+                "--weather",
+                class,
+                clear_path.to_str().unwrap(),
+                "--out",
+                dir.path()
+                    .join(format!("refused-{class}"))
+                    .to_str()
+                    .unwrap(),
+                "--mor",
+                "100",
+            ]);
+            assert!(!o.status.success());
+            assert!(
+                text(&o.stderr).contains("too few recordings"),
+                "{}",
+                text(&o.stderr)
+            );
+            continue;
+        }
         let (mut measured, mut simulated) = ([(0u64, 0u64); 2], [(0u64, 0u64); 2]);
         for (i, (id, mor, rate)) in recordings.iter().enumerate() {
             let out = dir.path().join(format!("sim-{class}{i}"));
@@ -483,4 +522,51 @@ fn round_trip_generator_fit_apply_matches_the_degraded_recordings_in_fog_rain_an
             );
         }
     }
+}
+
+/// A fog band whose slope the fit left null because the data showed no
+/// edge (issue #12): the table still loads, applying fog names the band and
+/// the reason and writes nothing, the identity (clear MOR) and the other
+/// weathers still apply.
+#[test]
+fn a_null_slope_from_the_edge_test_is_refused_with_its_reason() {
+    let (dir, table, input) = setup();
+    let mut t: serde_json::Value = serde_json::from_str(TABLE).unwrap();
+    t["weathers"]["fog"]["vanishing_slope"][0] = serde_json::json!({
+        "reflectivity_min": 0, "reflectivity_max": 10, "slope": null, "points": 5000,
+        "reason": "no edge: on held-out recordings survival by r/MOR predicts no better than survival by range alone",
+        "edge_test": { "gain_nats_per_recording": -1.5, "recordings_better": 3,
+                       "recordings": 30, "p_value": 1.0, "alpha": 0.01,
+                       "gain_over_constant_nats_per_recording": -0.5,
+                       "p_value_over_constant": 0.9, "mor_spread": 0.6,
+                       "basis": "r/MOR against range alone", "folds": 5,
+                       "edge_seen": false }
+    });
+    std::fs::write(&table, serde_json::to_string(&t).unwrap()).unwrap();
+    let run = |weather: &str, mor: &str, out: &str| {
+        murk(&[
+            "apply",
+            "--coefficients",
+            table.to_str().unwrap(),
+            "--weather",
+            weather,
+            "--mor",
+            mor,
+            input.to_str().unwrap(),
+            "--out",
+            dir.path().join(out).to_str().unwrap(),
+        ])
+    };
+    let o = run("fog", "60", "fog");
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o.stderr));
+    let e = text(&o.stderr);
+    assert!(
+        e.contains("weathers.fog.vanishing_slope[0].slope") && e.contains("no edge"),
+        "{e}"
+    );
+    assert!(!dir.path().join("fog").join("a.pcd").exists());
+    let o = run("fog", "5000", "identity");
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let o = run("rain", "60", "rain");
+    assert!(o.status.success(), "{}", text(&o.stderr));
 }

@@ -348,6 +348,9 @@ impl DiagnoseParams {
                     self.weather
                 )));
             }
+            if let Some(why) = null_slope(t, self.weather) {
+                return Err(DiagnoseError::Table(format!("the table {why}")));
+            }
         }
         Ok(DiagnoseValidParams(self))
     }
@@ -504,9 +507,36 @@ fn rank(findings: &[Finding]) -> Vec<usize> {
     idx
 }
 
+/// Why `table` cannot simulate `weather`, when one of its vanishing bands
+/// has a null slope (the fit saw no edge there, or too few returns): the
+/// held-out recordings are simulated with every band's slope, and a
+/// diagnosis of a model that is not there would only restate the reason.
+fn null_slope(table: &CoefficientTable, weather: WeatherClass) -> Option<String> {
+    let w = table.weathers.get(&weather)?;
+    let (i, b) = w
+        .vanishing_slope
+        .iter()
+        .enumerate()
+        // An empty band (no clear return in it) has nothing to simulate; the
+        // applier gives it its neighbour's slope with a warning.
+        .find(|(_, b)| b.slope.is_none() && b.points > 0)?;
+    Some(format!(
+        "gives {weather} no vanishing slope in band {i} (reflectivity [{}, {})): {}; held-out recordings cannot be simulated without it",
+        b.reflectivity_min,
+        b.reflectivity_max
+            .map_or("∞".to_string(), |m| m.to_string()),
+        b.reason.as_deref().unwrap_or("no reason given")
+    ))
+}
+
 impl DiagnoseValidParams {
+    /// The baselines keep the seed's law where the held-out edge test does
+    /// not confirm it (`require_edge` off; the test is still recorded in
+    /// the table's `edge_test`): a diagnosis measures what the law gets
+    /// wrong, which it cannot do with no slope to simulate.
     fn fit_params(&self) -> Result<FitValidParams, DiagnoseError> {
         FitParams::default()
+            .require_edge(false)
             .bootstrap_replicates(0)
             .seed(self.0.seed)
             .check()
@@ -779,6 +809,12 @@ impl DiagnoseValidParams {
             return Err(DiagnoseError::Campaign {
                 weather: loaded.weather.to_string(),
                 reason: format!("the fit on {what} produced no model for it"),
+            });
+        }
+        if let Some(why) = null_slope(&table, loaded.weather) {
+            return Err(DiagnoseError::Campaign {
+                weather: loaded.weather.to_string(),
+                reason: format!("the fit on {what} {why}"),
             });
         }
         Ok(table)

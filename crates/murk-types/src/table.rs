@@ -208,15 +208,95 @@ pub struct SlopeBand {
     /// Why `slope` is null.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reason: Option<String>,
-    /// Standard error of `slope`, when known.
+    /// Standard error of `slope`, when known. For the survival fit it is
+    /// over recordings (cluster-robust: the returns of one recording share
+    /// its MOR reading and sensor state); tables before this field's
+    /// documentation changed held the independent-returns value here.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub std_error: Option<f64>,
+    /// The standard error as if every return were independent (inverse
+    /// observed information), beside `std_error` for comparison: far
+    /// smaller when recordings disagree.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub std_error_independent: Option<f64>,
+    /// 95 % interval of `slope` over recordings.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ci95: Option<Interval>,
+    /// The held-out test that the data show an edge at all (survival fit
+    /// only); `slope` is null, with the reason, when they do not.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub edge_test: Option<EdgeTest>,
     /// Relative width of the soft edge (survival fit only).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub edge_width: Option<f64>,
+    /// 95 % interval of `edge_width` over recordings.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub edge_width_ci95: Option<Interval>,
     /// Per-MOR-bin quantiles of this band (quantile estimate only).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub mor_bins: Vec<MorBin>,
+}
+
+/// A confidence interval and how it was made.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Interval {
+    /// Lower end.
+    pub low: f64,
+    /// Upper end.
+    pub high: f64,
+    /// Nominal coverage (0.95).
+    pub level: f64,
+    /// How: `cluster-robust over recordings` (sandwich covariance with one
+    /// cluster per recording, in the fit's internal parameters — log slope,
+    /// log width, logit dropout — with Student's t on recordings − 1 degrees
+    /// of freedom) or `bootstrap over recordings`.
+    pub method: String,
+}
+
+/// Held-out evidence that survival follows an edge in `r / MOR` rather than
+/// range alone (the no-weather model).
+///
+/// Recordings are split into `folds` folds; each is predicted by both
+/// models fitted without it. Each recording's gain is the difference of its
+/// held-out log-likelihoods (edge − range alone); `p_value` is the one-sided
+/// sign-flip (randomisation) p-value of their mean over the `recordings`
+/// (exact up to 20 recordings), and the edge counts as seen (`edge_seen`)
+/// when the mean gain is positive and `p_value ≤ alpha`. Where the
+/// recordings' MORs spread less than the edge is wide (`mor_spread`, the
+/// standard deviation of `ln MOR`, below the fitted relative edge width),
+/// an edge in `r/MOR` cannot be told from one in `r`; if `r/MOR` still
+/// predicted the held-out recordings at least as well as range alone
+/// (mean gain ≥ 0), the edge is then tested against survival that depends
+/// on nothing instead
+/// (`gain_over_constant_nats_per_recording`, `p_value_over_constant`), and
+/// `basis` says which comparison decided.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EdgeTest {
+    /// Mean held-out log-likelihood gain per recording, nats.
+    pub gain_nats_per_recording: f64,
+    /// Recordings the edge predicted better than range alone.
+    pub recordings_better: u32,
+    /// Recordings with returns in the band.
+    pub recordings: u32,
+    /// One-sided sign-flip p-value of the mean gain.
+    pub p_value: f64,
+    /// The level the p-value must reach.
+    pub alpha: f64,
+    /// Mean held-out gain over survival that depends on nothing, nats per
+    /// recording.
+    pub gain_over_constant_nats_per_recording: f64,
+    /// Its one-sided sign-flip p-value.
+    pub p_value_over_constant: f64,
+    /// Standard deviation of `ln MOR` over the recordings.
+    pub mor_spread: f64,
+    /// The comparison that decided: `r/MOR against range alone` or, where
+    /// `mor_spread` is below the edge width, `edge against constant
+    /// survival`.
+    pub basis: String,
+    /// Folds over recordings.
+    pub folds: u32,
+    /// True when the test saw an edge.
+    pub edge_seen: bool,
 }
 
 /// One MOR bin of the quantile estimate.
@@ -265,8 +345,12 @@ pub struct SurvivalFit {
     /// The clear-weather dropout (leave-one-out against the reference).
     #[serde(default)]
     pub dropout_clear: Option<f64>,
+    /// 95 % interval of `dropout` over recordings (when it was fitted).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dropout_ci95: Option<Interval>,
     /// Residual survival π beyond the edge (returns that outlive the
-    /// weather: retro-reflectors, mismatches).
+    /// weather: retro-reflectors, mismatches). It often sits at its bound,
+    /// where the likelihood is flat: no interval is given.
     pub residual: f64,
     /// Negative log-likelihood at the optimum.
     pub neg_log_likelihood: f64,
@@ -757,7 +841,11 @@ mod tests {
             points: 10,
             reason: None,
             std_error: None,
+            std_error_independent: None,
+            ci95: None,
+            edge_test: None,
             edge_width: None,
+            edge_width_ci95: None,
             mor_bins: vec![],
         }
     }

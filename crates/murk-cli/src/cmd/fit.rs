@@ -71,6 +71,12 @@ pub struct Args {
     /// Fix the dropout to the clear-weather value instead of fitting it.
     #[arg(long)]
     pub fixed_dropout: bool,
+    /// Report a slope only where the held-out edge test sees an edge (null
+    /// with the reason otherwise). Off by default: the test is always run
+    /// and written in the table's `edge_test`, but its no-weather model can
+    /// mistake a static scene's own flicker for "no edge".
+    #[arg(long)]
+    pub require_edge: bool,
     /// Bootstrap replicates for rate uncertainties.
     #[arg(long, default_value_t = 1000)]
     pub bootstrap: u32,
@@ -103,6 +109,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .edge(murk_fit::parse_edge(&args.edge)?)
         .shared_edge_width(!args.per_band_width)
         .free_dropout(!args.fixed_dropout)
+        .require_edge(args.require_edge)
         .bootstrap_replicates(args.bootstrap)
         .seed(args.seed)
         .radar_tolerance_m(args.radar_tolerance)

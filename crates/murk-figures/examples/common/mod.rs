@@ -31,7 +31,11 @@ fn band(min: f64, max: Option<f64>, slope: Option<f64>, bins: Vec<MorBin>) -> Sl
             .is_none()
             .then(|| "no MOR bin with 50 no-change returns".into()),
         std_error: None,
+        std_error_independent: None,
+        ci95: None,
+        edge_test: None,
         edge_width: None,
+        edge_width_ci95: None,
         mor_bins: bins,
     }
 }
