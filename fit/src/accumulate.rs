@@ -300,7 +300,7 @@ impl WeatherAcc {
             if trials > 0 || k > 0 {
                 own.push((
                     self.survival.index(cells.class[j] as usize, b) as u32,
-                    k as u32,
+                    k,
                     trials as u32,
                 ));
             }
