@@ -277,7 +277,7 @@ fn drop_see_through(m: &[f32], w: usize, h: usize, densify: &Densify) -> Vec<f32
     for y in 0..h {
         for x in 0..w {
             let d = m[y * w + x];
-            if d.is_nan() || !d.is_finite() {
+            if !d.is_finite() {
                 continue;
             }
             let limit = d / (1.0 + margin);

@@ -182,8 +182,8 @@ fn plan(inputs: &[PathBuf], out: &Path) -> anyhow::Result<Vec<Job>> {
 }
 
 /// `""` for one, `"s"` otherwise.
-fn plural(n: usize) -> &'static str {
-    if n == 1 { "" } else { "s" }
+fn plural<N: PartialEq + From<u8>>(n: N) -> &'static str {
+    if n == N::from(1) { "" } else { "s" }
 }
 
 /// Runs `murk convert`.
@@ -362,11 +362,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             notes.push(format!(
                 "{} foreign packet{} skipped",
                 frames.notes.foreign_packets,
-                if frames.notes.foreign_packets == 1 {
-                    ""
-                } else {
-                    "s"
-                }
+                plural(frames.notes.foreign_packets)
             ));
         }
         if !notes.is_empty() {
