@@ -27,7 +27,7 @@ pub const REFLECTIVITY_SPAN: f64 = 1024.0;
 pub const OCCLUDER_STEP_M: f64 = 0.01;
 
 /// The scalars of one recording.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct RecordingRow {
     /// Position in the fit's recording list (the merge order).
     pub index: usize,
@@ -118,7 +118,7 @@ fn merge_cells(mut v: Vec<(u32, u32, u32)>) -> Vec<(u32, u32, u32)> {
 /// of ghost (or ring) returns; `exposure` is Σ weight × rays. The share of
 /// rays open at distance `d` is then `1 − Σ_{k ≤ d} occluders / exposure`,
 /// the visibility by which the distance law is seen.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct NoiseAcc {
     /// Range histogram over the class window.
     pub distance: Histogram,
@@ -192,7 +192,7 @@ impl NoiseAcc {
 }
 
 /// Everything kept of one weather's recordings.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct WeatherAcc {
     /// Per MOR bin index: recordings and *no change* count per cell.
     pub bins: BTreeMap<i64, (u32, Vec<u32>)>,

@@ -7,21 +7,19 @@ use std::path::{Path, PathBuf};
 use murk_campaign::Campaign;
 use murk_types::{
     ClearCoefficients, CoefficientTable, CountUnit, ExcludedRecording, InputDigest, Provenance,
-    RadarCoefficients, TABLE_FORMAT, TableLidar, WeatherClass,
+    RadarCoefficients, SensorGeometry, TABLE_FORMAT, TableLidar, WeatherClass,
 };
 use rayon::prelude::*;
 
-use crate::assemble::{RainSample, WeatherContext, rain_conversion, uncertainty, weather};
+use crate::accumulate::WeatherAcc;
+use crate::assemble::{WeatherContext, uncertainty, weather};
 use crate::diagnostics::Diagnostics;
-use crate::driver::{
-    DegradedJob, FitInputs, RecordingInput, accumulate_degraded, build_reference, measure_geometry,
-    read_file, read_radar, relative, sha256_hex,
-};
+use crate::driver::{FitInputs, RecordingInput, relative, sha256_hex};
 use crate::radar::{Detections, RadarReference};
-use crate::reference::CellGrid;
+use crate::reference::ClearReference;
+use crate::state::{degraded_jobs, partition};
 use crate::stats::bootstrap::bootstrap_rate;
-use crate::survival::Partition;
-use crate::{FitError, FitValidParams};
+use crate::{FitError, FitState, FitValidParams};
 
 /// Name and version written in the table's provenance.
 pub const TOOL: &str = concat!("murk-fit ", env!("CARGO_PKG_VERSION"));
@@ -46,118 +44,67 @@ impl FitValidParams {
     }
 }
 
+/// The one-shot fit is map over everything, then finish: one code path
+/// with the distributed fit ([`crate::FitState`]).
 fn fit_inputs(inputs: &FitInputs, params: &FitValidParams) -> Result<FittedTable, FitError> {
-    inputs.lidar.validate().map_err(|e| FitError::File {
-        path: inputs.dir.join("campaign.toml"),
-        reason: e.to_string(),
-    })?;
+    FitState::map_all(inputs, params)?.finish()
+}
+
+/// What a complete [`FitState`] hands to [`assemble_table`].
+pub(crate) struct Parts<'a> {
+    pub inputs: &'a FitInputs,
+    pub params: &'a FitValidParams,
+    /// The table's geometry and the measured one's warnings.
+    pub geometry: (SensorGeometry, Vec<String>),
+    pub reference: &'a ClearReference,
+    /// Clear recordings left out (no point), in campaign order.
+    pub empty_clear: Vec<ExcludedRecording>,
+    /// SHA-256 of every LiDAR file read.
+    pub lidar_digests: Vec<(PathBuf, String)>,
+    /// Degraded recordings left out (no point), positions ascending.
+    pub empty_degraded: Vec<usize>,
+    pub accs: &'a BTreeMap<WeatherClass, WeatherAcc>,
+    pub radar: &'a BTreeMap<usize, (Detections, String)>,
+    pub metadata: &'a [(PathBuf, String)],
+}
+
+/// The table of a complete fit's statistics.
+pub(crate) fn assemble_table(parts: Parts<'_>) -> Result<FittedTable, FitError> {
+    let Parts {
+        inputs,
+        params,
+        geometry: (geometry, geometry_warnings),
+        reference,
+        empty_clear,
+        lidar_digests: mut digests,
+        empty_degraded,
+        accs,
+        radar: radar_detections,
+        metadata,
+    } = parts;
     let range_scale = inputs.lidar.range_scale;
     let clear: Vec<&RecordingInput> = inputs
         .recordings
         .iter()
         .filter(|r| r.class == WeatherClass::Clear)
         .collect();
-    if clear.is_empty() {
-        return Err(FitError::NoClearReference {
-            path: inputs.dir.clone(),
-            reason: "no recording was selected as clear (rules and review), so no degraded recording can be paired".into(),
-        });
-    }
-    let (mut geometry, geometry_warnings) = measure_geometry(inputs)?;
-    if params.declared_geometry() {
-        geometry = crate::geometry::declared(&inputs.lidar);
-    }
-    let grid = CellGrid::from_geometry(&geometry);
-    let (reference, mut digests, empty_clear) = build_reference(inputs, &clear, &grid, params)?;
     // Clear recordings the reference is built from (not the empty ones).
     let clear_used = clear.len() - empty_clear.len();
-    if clear_used == 0 {
-        return Err(FitError::NoClearReference {
-            path: inputs.dir.clone(),
-            reason: format!(
-                "every one of the {} clear recordings holds no point",
-                clear.len()
-            ),
-        });
-    }
-    if reference.present().is_empty() {
-        return Err(FitError::NoClearReference {
-            path: inputs.dir.clone(),
-            reason: format!(
-                "the {} clear recordings share no stable return (presence ≥ {})",
-                clear_used,
-                params.reference_min_presence()
-            ),
-        });
-    }
     let loo = reference.leave_one_out();
     let (lk, lt) = loo.iter().fold((0u64, 0u64), |a, r| (a.0 + r.0, a.1 + r.1));
     let clear_rate = (clear_used >= 2 && lt > 0).then(|| lk as f64 / lt as f64);
     let dropout_clear = clear_rate.map(|r| 1.0 - r);
 
-    // Rain conversion from the metadata, before any point is read: rain
-    // recordings without a MOR borrow it.
-    let rain_pairs: Vec<RainSample> = inputs
-        .recordings
-        .iter()
-        .filter(|r| r.class == WeatherClass::Rain)
-        .filter_map(|r| {
-            let readings = match r.rain_readings.is_empty() {
-                true => vec![r.rain_rate?],
-                false => r.rain_readings.clone(),
-            };
-            Some(RainSample {
-                readings,
-                mor: r.mor?,
-            })
-        })
-        .collect();
-    let has_rain = inputs
-        .recordings
-        .iter()
-        .any(|r| r.class == WeatherClass::Rain);
-    let conversion = has_rain.then(|| rain_conversion(&rain_pairs));
-
+    let degraded = degraded_jobs(inputs);
+    let conversion = degraded.conversion;
+    let partition = partition(params);
     let mut excluded = empty_clear;
-    let mut jobs = Vec::new();
-    for r in inputs
-        .recordings
-        .iter()
-        .filter(|r| r.class != WeatherClass::Clear)
-    {
-        let mor = match (r.mor, r.rain_rate, &conversion) {
-            (Some(m), _, _) if m.is_finite() && m > 0.0 => Ok(m),
-            (Some(m), _, _) => Err(format!("MOR {m} is not a positive distance")),
-            (None, Some(rate), Some(Ok(c))) if c.mor(rate) > 0.0 => Ok(c.mor(rate)),
-            (None, Some(rate), Some(Ok(c))) => Err(format!(
-                "no MOR, and the rain conversion gives {:.1} m at {rate} mm/h",
-                c.mor(rate)
-            )),
-            (None, _, _) => {
-                Err("no MOR (every visibility column is empty) and no rain conversion".to_string())
-            }
-        };
-        match mor {
-            Ok(mor) => jobs.push(DegradedJob { input: r, mor }),
-            Err(reason) => excluded.push(ExcludedRecording {
-                recording: r.id.clone(),
-                weather: r.class,
-                reason,
-            }),
-        }
-    }
-
-    let partition = Partition::new(
-        params
-            .bands()
-            .iter()
-            .chain(params.sweep_bands().iter())
-            .map(|b| b.min),
+    excluded.extend(degraded.excluded.into_iter().map(|(_, e)| e));
+    excluded.extend(
+        empty_degraded
+            .into_iter()
+            .map(|i| crate::driver::empty_recording(&inputs.recordings[i])),
     );
-    let (accs, degraded_digests, empty_degraded) =
-        accumulate_degraded(inputs, &jobs, &reference, &partition, params)?;
-    excluded.extend(empty_degraded);
-    digests.extend(degraded_digests);
 
     let mut weathers = BTreeMap::new();
     let mut diagnostics = Diagnostics::default();
@@ -172,7 +119,7 @@ fn fit_inputs(inputs: &FitInputs, params: &FitValidParams) -> Result<FittedTable
         };
         let cx = WeatherContext {
             class,
-            reference: &reference,
+            reference,
             partition: &partition,
             params,
             range_scale,
@@ -203,18 +150,11 @@ fn fit_inputs(inputs: &FitInputs, params: &FitValidParams) -> Result<FittedTable
             .then(|| "a single clear recording: no reference can be built without it".into()),
     };
 
-    let (radar, radar_digests) = radar(inputs, params)?;
+    let (radar, radar_digests) = radar(inputs, params, radar_detections)?;
     digests.extend(radar_digests);
+    digests.extend(metadata.iter().cloned());
 
     // Provenance: every file read, sorted by relative path.
-    let meta: Vec<Result<(PathBuf, String), FitError>> = inputs
-        .metadata
-        .par_iter()
-        .map(|p| Ok((p.clone(), sha256_hex(&read_file(p)?))))
-        .collect();
-    for m in meta {
-        digests.push(m?);
-    }
     let mut inputs_list: Vec<InputDigest> = digests
         .into_iter()
         .map(|(p, d)| InputDigest {
@@ -259,25 +199,17 @@ type Digests = Vec<(PathBuf, String)>;
 fn radar(
     inputs: &FitInputs,
     params: &FitValidParams,
+    read: &BTreeMap<usize, (Detections, String)>,
 ) -> Result<(Option<RadarCoefficients>, Digests), FitError> {
-    let with_radar: Vec<&RecordingInput> = inputs
-        .recordings
-        .iter()
-        .filter(|r| r.radar.is_some())
-        .collect();
+    let with_radar: Vec<&RecordingInput> = read.keys().map(|&i| &inputs.recordings[i]).collect();
     if with_radar.is_empty() {
         return Ok((None, Vec::new()));
     }
-    let read: Vec<Result<(Detections, String), FitError>> = with_radar
-        .par_iter()
-        .map(|r| read_radar(r.radar.as_deref().unwrap_or(Path::new(""))))
-        .collect();
     let mut det = Vec::with_capacity(read.len());
     let mut digests = Vec::new();
-    for (r, res) in with_radar.iter().zip(read) {
-        let (d, h) = res?;
-        digests.push((r.radar.clone().unwrap_or_default(), h));
-        det.push(d);
+    for (r, (d, h)) in with_radar.iter().zip(read.values()) {
+        digests.push((r.radar.clone().unwrap_or_default(), h.clone()));
+        det.push(d.clone());
     }
     let tol = params.radar_tolerance_m();
     let clear_idx: Vec<usize> = (0..with_radar.len())

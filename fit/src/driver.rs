@@ -40,7 +40,7 @@ use crate::survival::Partition;
 use crate::{FitError, FitValidParams};
 
 /// One recording as the fit sees it.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct RecordingInput {
     /// Recording id.
     pub id: String,
@@ -61,13 +61,14 @@ pub struct RecordingInput {
 
 /// Everything a fit reads: the campaign's metadata and the selected
 /// recordings (see [`FitInputs::from_campaign`]).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FitInputs {
     /// Campaign folder (input paths are reported relative to it).
     pub dir: PathBuf,
     /// Campaign name.
     pub name: String,
     /// The LiDAR.
+    #[serde(with = "crate::state::json")]
     pub lidar: LidarSpec,
     /// Selected recordings, in campaign order.
     pub recordings: Vec<RecordingInput>,
@@ -364,23 +365,14 @@ fn no_points(r: &RecordingInput) -> ExcludedRecording {
     }
 }
 
-/// What [`build_reference`] returns: the reference, the digests of the
-/// files read, and the clear recordings left out (no point).
-pub type Reference = (
-    ClearReference,
-    Vec<(PathBuf, String)>,
-    Vec<ExcludedRecording>,
-);
-
-/// The clear reference of `recs` (all clear): images in parallel, then the
-/// reference. Returns the digests of the files read, and the recordings
-/// left out because their file holds no point.
-pub fn build_reference(
+/// The cell image of every recording of `recs` (read in parallel; `None`
+/// when its file holds no point) and its file's SHA-256, in the order of
+/// `recs`; the error of the first bad recording in that order.
+pub fn clear_images(
     inputs: &FitInputs,
     recs: &[&RecordingInput],
     grid: &CellGrid,
-    params: &FitValidParams,
-) -> Result<Reference, FitError> {
+) -> Result<Vec<(Option<CellImage>, String)>, FitError> {
     let images: Vec<Result<(Option<CellImage>, String), FitError>> = recs
         .par_iter()
         .map(|r| {
@@ -390,22 +382,12 @@ pub fn build_reference(
             Ok((img, digest))
         })
         .collect();
-    let mut imgs = Vec::with_capacity(images.len());
-    let mut digests = Vec::with_capacity(images.len());
-    let mut excluded = Vec::new();
-    for (r, res) in recs.iter().zip(images) {
-        let (img, d) = res?;
-        match img {
-            Some(img) => imgs.push(img),
-            None => excluded.push(no_points(r)),
-        }
-        digests.push((r.lidar.clone(), d));
-    }
-    Ok((
-        ClearReference::build(grid.clone(), &imgs, params),
-        digests,
-        excluded,
-    ))
+    images.into_iter().collect()
+}
+
+/// The exclusion of a recording whose file holds no point.
+pub fn empty_recording(r: &RecordingInput) -> ExcludedRecording {
+    no_points(r)
 }
 
 /// The per-weather accumulators of one worker.
@@ -421,6 +403,11 @@ pub struct WorkerState {
 /// A degraded recording ready for pairing: its input and its MOR.
 #[derive(Debug, Clone)]
 pub struct DegradedJob<'a> {
+    /// Position in the fit's list of degraded jobs (the row index: the
+    /// order of every float summary), the same in every shard.
+    pub index: usize,
+    /// Position of the recording in [`FitInputs::recordings`].
+    pub recording: usize,
     /// The recording.
     pub input: &'a RecordingInput,
     /// MOR used (measured, or converted from the rain rate).
@@ -428,12 +415,13 @@ pub struct DegradedJob<'a> {
 }
 
 /// What [`accumulate_degraded`] returns: the accumulator of every weather,
-/// the SHA-256 of every file read, and the recordings left out because
-/// their file holds no point.
+/// the SHA-256 of every file read and the recordings (positions in
+/// [`FitInputs::recordings`]) left out because their file holds no point,
+/// both ascending.
 pub type Accumulated = (
     BTreeMap<WeatherClass, WeatherAcc>,
-    Vec<(PathBuf, String)>,
-    Vec<ExcludedRecording>,
+    Vec<(usize, String)>,
+    Vec<usize>,
 );
 
 /// Streams the degraded recordings through pairing into accumulators.
@@ -468,7 +456,7 @@ pub fn accumulate_degraded(
                 .entry(job.input.class)
                 .or_insert_with(|| WeatherAcc::new(params, partition))
                 .add(
-                    i,
+                    job.index,
                     &job.input.id,
                     job.mor,
                     job.input.rain_rate,
@@ -498,17 +486,12 @@ pub fn accumulate_degraded(
     for a in accs.values_mut() {
         a.finish();
     }
+    let mut digests: Vec<(usize, String)> = digests
+        .into_iter()
+        .map(|(i, d)| (jobs[i].recording, d))
+        .collect();
     digests.sort();
+    let mut empty: Vec<usize> = empty.into_iter().map(|i| jobs[i].recording).collect();
     empty.sort_unstable();
-    Ok((
-        accs,
-        digests
-            .into_iter()
-            .map(|(i, d)| (jobs[i].input.lidar.clone(), d))
-            .collect(),
-        empty
-            .into_iter()
-            .map(|i| no_points(jobs[i].input))
-            .collect(),
-    ))
+    Ok((accs, digests, empty))
 }

@@ -62,6 +62,40 @@ pub enum FitError {
         /// The operating-system error or other reason.
         reason: String,
     },
+    /// The recordings a partial fit is asked to map do not fit the campaign
+    /// or the phase.
+    #[error("{reason}")]
+    Selection {
+        /// What is wrong with the selection.
+        reason: String,
+    },
+    /// A fit state that cannot be read (not a state, truncated, corrupted,
+    /// of another format or murk version).
+    #[error("{state}: {reason}")]
+    State {
+        /// The state's file (or what it holds, for a state in memory).
+        state: String,
+        /// What is wrong.
+        reason: String,
+    },
+    /// Two fit states that cannot be merged.
+    #[error("{a} and {b} cannot be merged: {reason}")]
+    StateMismatch {
+        /// The first state.
+        a: String,
+        /// The second state.
+        b: String,
+        /// What differs.
+        reason: String,
+    },
+    /// A fit state that lacks recordings asked for a table or a reference.
+    #[error("{state} is incomplete: {missing}")]
+    Incomplete {
+        /// The state.
+        state: String,
+        /// What it lacks.
+        missing: String,
+    },
     /// The table failed its own validation (a bug: every value is checked
     /// before it is stored).
     #[error(transparent)]

@@ -84,7 +84,7 @@ impl Band {
 pub struct FitParams(FitValidParams);
 
 /// Checked hyperparameters (see [`FitParams`] for the table).
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
 pub struct FitValidParams {
     pub(crate) quantile: f64,
     pub(crate) mor_bin_width_m: f64,
@@ -219,6 +219,11 @@ impl FitParams {
         radar_tolerance_m: f64);
     setter!(/// Sets `radar_min_presence`.
         radar_min_presence: f64);
+
+    /// The parameters of a state file, to be checked again.
+    pub(crate) fn from_valid(p: FitValidParams) -> FitParams {
+        FitParams(p)
+    }
 
     /// Checks every parameter against its range; the first violation is
     /// returned by name.

@@ -26,6 +26,13 @@
 //! `driver` reads files (through `murk-io`) and streams recordings, keeping
 //! per-cell and per-bin statistics, never the points of a campaign.
 //!
+//! **Map and merge.** The same table can be fitted in pieces on many
+//! machines: [`FitValidParams::fit_partial`] maps a [`Selection`] of
+//! recordings into a serialisable [`FitState`], [`FitState::merge`] merges
+//! states in any order, [`FitState::finish`] gives the table, byte for byte
+//! the one [`FitValidParams::fit`] gives (which is map over everything, then
+//! finish). See the `state` module's example.
+//!
 //! **One door.** Besides the fit itself, the crate's public surface is
 //! [`observe`]: the campaign's inputs, the clear reference, the measured
 //! firing geometry and the pairing of one recording, exactly as the fit
@@ -92,6 +99,9 @@ mod pairing;
 mod quantile_slope;
 mod radar;
 mod reference;
+// Reads and writes state files (fit/clippy.toml).
+#[allow(clippy::disallowed_methods, clippy::disallowed_types)]
+pub mod state;
 mod stats;
 mod survival;
 
@@ -104,6 +114,7 @@ pub use diagnostics::{
 pub use driver::{FitInputs, RecordingInput};
 pub use error::FitError;
 pub use hyperparams::{Band, EdgeShape, FitParams, FitValidParams, parse_edge};
+pub use state::{FitState, STATE_FORMAT, Selection};
 /// The maximum-likelihood survival fit on its own (a benchmark target and a
 /// building block for other estimators; `fit` calls it per band).
 pub use survival::{Obs, SurvivalOptions, fit_survival};

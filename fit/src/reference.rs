@@ -173,7 +173,7 @@ pub fn cell_points(
 }
 
 /// A clear recording reduced to one value per occupied cell.
-#[derive(Debug, Clone, PartialEq, Default)]
+#[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]
 pub struct CellImage {
     /// Occupied cells, ascending.
     pub cells: Vec<u32>,

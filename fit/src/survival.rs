@@ -69,7 +69,7 @@ impl Partition {
 }
 
 /// Kept / total counts of clear returns per reflectivity class and `ln u` bin.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SurvivalHistogram {
     ln_u0: f64,
     step: f64,

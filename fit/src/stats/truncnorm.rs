@@ -14,7 +14,7 @@ use crate::stats::dist::normal_cdf;
 use crate::stats::optim::{INVALID, hessian, invert, minimize};
 
 /// A histogram of values on `[lo, hi)` with uniform bins.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Histogram {
     lo: f64,
     width: f64,
