@@ -1,8 +1,13 @@
 //! `murk fit CAMPAIGN --out T.json [--figures DIR]`: fits the coefficient
 //! table of a campaign, prints a summary and optionally draws the figures.
+//! `murk fit CAMPAIGN --partial OUT.state [--recordings ID,…|--shard K/N]
+//! [--reference CLEAR.state]` maps part of it into a fit state, and
+//! `murk fit --merge A.state B.state … --out T.json|OUT.state` merges states
+//! (see [`murk_fit::FitState`]).
 //!
 //! Glue only: flags → [`murk_fit::FitParams`] → [`murk_fit::FitValidParams::fit`]
-//! → table file, summary and figure data.
+//! (or `fit_partial`, `FitState::merge`) → table or state file, summary and
+//! figure data.
 
 use std::path::{Path, PathBuf};
 
@@ -13,18 +18,44 @@ use murk_figures::{
     FigureOptions, GaussianPanel, RangeMorFigure, SweepFigure, gaussian_histograms, mor_histogram,
     range_vs_mor, slope_vs_reflectivity,
 };
-use murk_fit::{FitParams, FittedTable, NoiseHistograms};
+use murk_fit::{FitInputs, FitParams, FitState, FittedTable, NoiseHistograms, Selection};
 use murk_types::NoiseLaw;
 
 /// Arguments of `murk fit`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// The campaign folder.
-    pub campaign: PathBuf,
+    /// The campaign folder (not with --merge).
+    #[arg(required_unless_present = "merge")]
+    pub campaign: Option<PathBuf>,
     /// Where to write the coefficient table (JSON, written atomically; its
-    /// folder is created when missing).
-    #[arg(long)]
-    pub out: PathBuf,
+    /// folder is created when missing). With --merge, a path ending in
+    /// `.state` gets the merged state instead of a table.
+    #[arg(long, required_unless_present = "partial")]
+    pub out: Option<PathBuf>,
+    /// Map part of the campaign into a fit state file instead of fitting it:
+    /// its clear recordings, or with --reference its degraded ones.
+    #[arg(long, value_name = "OUT.state", conflicts_with_all = ["out", "merge", "figures"])]
+    pub partial: Option<PathBuf>,
+    /// With --partial: only these recordings (ids, comma separated).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        requires = "partial",
+        conflicts_with = "shard"
+    )]
+    pub recordings: Vec<String>,
+    /// With --partial: block K (1-based) of N nearly equal blocks of the
+    /// phase's recordings in campaign order, for example 3/8.
+    #[arg(long, value_name = "K/N", requires = "partial")]
+    pub shard: Option<String>,
+    /// With --partial: the merged state of every clear recording; the
+    /// degraded recordings are then mapped against it.
+    #[arg(long, value_name = "CLEAR.state", requires = "partial")]
+    pub reference: Option<PathBuf>,
+    /// Merge these fit states (of one campaign and parameters; the fit
+    /// parameters are the states', the flags are not used) into --out.
+    #[arg(long, num_args = 1.., value_name = "STATE", conflicts_with = "campaign")]
+    pub merge: Vec<PathBuf>,
     /// Folder for the figures (PNG and SVG); created when missing.
     #[arg(long)]
     pub figures: Option<PathBuf>,
@@ -91,9 +122,17 @@ pub struct Args {
 /// Runs `murk fit`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     // Before minutes of fitting, not after.
-    super::check_file_target("--out", &args.out)?;
+    if let Some(out) = &args.out {
+        super::check_file_target("--out", out)?;
+    }
+    if let Some(out) = &args.partial {
+        super::check_file_target("--partial", out)?;
+    }
     if let Some(dir) = &args.figures {
         super::check_folder_target("--figures", dir)?;
+    }
+    if !args.merge.is_empty() {
+        return merge(&args);
     }
     let params = FitParams::default()
         .quantile(args.quantile)
@@ -114,18 +153,90 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .seed(args.seed)
         .radar_tolerance_m(args.radar_tolerance)
         .check()?;
-    let campaign = Campaign::open(&args.campaign)?;
-    let bar = super::spinner(format!("fitting {}", args.campaign.display()));
+    let Some(dir) = &args.campaign else {
+        anyhow::bail!("give a campaign folder, or --merge STATE…");
+    };
+    let campaign = Campaign::open(dir)?;
+    if let Some(state_out) = &args.partial {
+        let selection = match (&args.shard, args.recordings.is_empty()) {
+            (Some(s), _) => Selection::parse_shard(s)?,
+            (None, false) => Selection::Recordings(args.recordings.clone()),
+            (None, true) => Selection::All,
+        };
+        let reference = args.reference.as_deref().map(FitState::read).transpose()?;
+        let inputs = FitInputs::from_campaign(&campaign);
+        let bar = super::spinner(format!("mapping {}", dir.display()));
+        let state = params.fit_partial(&inputs, &selection, reference.as_ref());
+        bar.finish_and_clear();
+        let state = state?;
+        state.write(state_out)?;
+        outln!(
+            "{} recordings of {} mapped; state written to {}",
+            state.recordings().len(),
+            state.campaign(),
+            state_out.display()
+        );
+        if let Some(m) = state.missing_description() {
+            outln!("still to map: {m}");
+        }
+        return Ok(());
+    }
+    let bar = super::spinner(format!("fitting {}", dir.display()));
     let fitted = params.fit(&campaign);
     bar.finish_and_clear();
-    let fitted = fitted?;
-    if let Some(parent) = args.out.parent().filter(|p| !p.as_os_str().is_empty()) {
+    write_table(&args, fitted?)
+}
+
+/// `murk fit --merge A.state B.state … --out T.json|OUT.state`.
+fn merge(args: &Args) -> anyhow::Result<()> {
+    let Some(out) = &args.out else {
+        anyhow::bail!("--merge needs --out T.json (a table) or --out OUT.state (a merged state)");
+    };
+    let mut merged: Option<FitState> = None;
+    for path in &args.merge {
+        let s = FitState::read(path)?;
+        merged = Some(match merged {
+            None => s,
+            Some(m) => m.merge(s)?,
+        });
+    }
+    let Some(state) = merged else {
+        anyhow::bail!("--merge needs at least one state file");
+    };
+    if out.extension().is_some_and(|e| e == "state") {
+        state.write(out)?;
+        outln!(
+            "{} states merged ({} recordings of {}); state written to {}",
+            args.merge.len(),
+            state.recordings().len(),
+            state.campaign(),
+            out.display()
+        );
+        if let Some(m) = state.missing_description() {
+            outln!("still to map: {m}");
+        }
+        return Ok(());
+    }
+    let fitted = state.finish().with_context(|| {
+        format!(
+            "{}: a table needs every recording; write the merge to a .state file to keep it",
+            out.display()
+        )
+    })?;
+    write_table(args, fitted)
+}
+
+fn write_table(args: &Args, fitted: FittedTable) -> anyhow::Result<()> {
+    let Some(out) = &args.out else {
+        anyhow::bail!("give --out T.json");
+    };
+    if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(parent)
             .with_context(|| format!("{}: cannot create the folder", parent.display()))?;
     }
-    fitted.write(&args.out)?;
+    fitted.write(out)?;
     out!("{}", fitted.summary());
-    outln!("table written to {}", args.out.display());
+    outln!("table written to {}", out.display());
     if let Some(dir) = &args.figures {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("{}: cannot create the figure folder", dir.display()))?;
