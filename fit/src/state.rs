@@ -137,12 +137,12 @@ impl Selection {
     }
 
     fn check(&self) -> Result<(), FitError> {
-        if let Selection::Shard { k, n } = *self {
-            if n == 0 || k == 0 || k > n {
-                return Err(FitError::Selection {
-                    reason: format!("shard {k}/{n}: K must lie in 1..=N and N be at least 1"),
-                });
-            }
+        if let Selection::Shard { k, n } = *self
+            && (n == 0 || k == 0 || k > n)
+        {
+            return Err(FitError::Selection {
+                reason: format!("shard {k}/{n}: K must lie in 1..=N and N be at least 1"),
+            });
         }
         Ok(())
     }
@@ -844,23 +844,25 @@ impl FitState {
         // A complete clear part must be the one the degraded part was paired
         // against.
         for (c, d) in [(&self, &other), (&other, &self)] {
-            if let Some(r) = &d.body.reference_sha256 {
-                if !c.body.clear.is_empty() && c.missing().0.is_empty() && c.clear_sha256() != r {
-                    return Err(FitError::StateMismatch {
-                        a: c.label.clone(),
-                        b: d.label.clone(),
-                        reason: format!(
-                            "the degraded recordings of {} were paired against a different clear reference than the clear recordings of {}",
-                            d.label, c.label
-                        ),
-                    });
-                }
+            if let Some(r) = &d.body.reference_sha256
+                && !c.body.clear.is_empty()
+                && c.missing().0.is_empty()
+                && c.clear_sha256() != r
+            {
+                return Err(FitError::StateMismatch {
+                    a: c.label.clone(),
+                    b: d.label.clone(),
+                    reason: format!(
+                        "the degraded recordings of {} were paired against a different clear reference than the clear recordings of {}",
+                        d.label, c.label
+                    ),
+                });
             }
         }
-        if let (Some(x), Some(y)) = (&self.body.geometry, &other.body.geometry) {
-            if x != y {
-                return Err(err("they measured different firing geometries".into()));
-            }
+        if let (Some(x), Some(y)) = (&self.body.geometry, &other.body.geometry)
+            && x != y
+        {
+            return Err(err("they measured different firing geometries".into()));
         }
         let label = match self.label.len() + other.label.len() < 160 {
             true => format!("{} + {}", self.label, other.label),
@@ -911,14 +913,13 @@ impl FitState {
                 missing,
             });
         }
-        if let Some(r) = &self.body.reference_sha256 {
-            if r != self.clear_sha256() {
-                return Err(FitError::StateMismatch {
-                    a: self.label.clone(),
-                    b: self.label.clone(),
-                    reason: "its degraded recordings were paired against a different clear reference than its clear recordings".into(),
-                });
-            }
+        if let Some(r) = &self.body.reference_sha256
+            && r != self.clear_sha256()
+        {
+            return Err(FitError::State {
+                state: self.label.clone(),
+                reason: "its degraded recordings were paired against a different clear reference than its clear recordings".into(),
+            });
         }
         let reference = self.clear_reference()?;
         let b = &self.body;
