@@ -116,7 +116,7 @@ pub fn fit(e: &murk_fit::FitError) -> PyErr {
     use murk_fit::FitError as E;
     let m = message(e);
     match e {
-        E::InvalidParam { .. } => InputError::new_err(m),
+        E::InvalidParam { .. } | E::Selection { .. } => InputError::new_err(m),
         E::Campaign(_) => CampaignError::new_err(m),
         E::Read(_) => FileError::new_err(m),
         _ => FitError::new_err(m),

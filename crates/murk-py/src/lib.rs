@@ -26,7 +26,7 @@ use murk_infer::{ApplyParams, Severity, SlopeSource};
 use murk_io::{PcdData, ReadOptions, WriteOptions};
 use murk_types::{CoefficientTable, CovariateValue, IntensityScale, PointFormat, WeatherClass};
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyTuple};
+use pyo3::types::{PyBytes, PyDict, PyTuple};
 
 use crate::cloud::Output;
 use crate::errors::input;
@@ -602,15 +602,8 @@ fn input_err(path: &std::path::Path, reason: &str) -> PyErr {
     input(format!("{}: {reason}", path.display()))
 }
 
-/// Fits a campaign folder into a coefficient table.
-#[pyfunction]
-#[pyo3(signature = (campaign, *, threads=None, **params))]
-fn fit(
-    py: Python<'_>,
-    campaign: PathBuf,
-    threads: Option<usize>,
-    params: Option<&Bound<'_, PyDict>>,
-) -> PyResult<Table> {
+/// `murk fit`'s flags as keyword arguments → checked fit parameters.
+fn fit_params(params: Option<&Bound<'_, PyDict>>) -> PyResult<murk_fit::FitValidParams> {
     let mut p = murk_fit::FitParams::default();
     if let Some(d) = params {
         for (k, v) in d.iter() {
@@ -667,7 +660,19 @@ fn fit(
             };
         }
     }
-    let valid = p.check().map_err(|e| errors::fit(&e))?;
+    p.check().map_err(|e| errors::fit(&e))
+}
+
+/// Fits a campaign folder into a coefficient table.
+#[pyfunction]
+#[pyo3(signature = (campaign, *, threads=None, **params))]
+fn fit(
+    py: Python<'_>,
+    campaign: PathBuf,
+    threads: Option<usize>,
+    params: Option<&Bound<'_, PyDict>>,
+) -> PyResult<Table> {
+    let valid = fit_params(params)?;
     let table = py
         .detach(|| {
             pool::run(threads, || -> PyResult<CoefficientTable> {
@@ -681,6 +686,173 @@ fn fit(
     Ok(Table {
         inner: Arc::new(table),
         path: None,
+    })
+}
+
+/// What `__reduce__` returns: the constructor and its arguments.
+type Reduced<'py> = (Bound<'py, PyAny>, (Bound<'py, PyBytes>, String));
+
+/// The statistics of part of a campaign's recordings (`murk fit
+/// --partial`'s state): merge states with [`FitState::merge`], and finish
+/// a complete one into its table. Picklable (its bytes are the state file).
+#[pyclass(frozen, module = "murk")]
+struct FitState {
+    inner: Arc<murk_fit::FitState>,
+}
+
+#[pymethods]
+impl FitState {
+    /// Reads a state file written by `murk fit --partial` or `FitState.write`.
+    #[staticmethod]
+    fn read(py: Python<'_>, path: PathBuf) -> PyResult<FitState> {
+        let s = py
+            .detach(|| murk_fit::FitState::read(&path))
+            .map_err(|e| errors::fit(&e))?;
+        Ok(FitState { inner: Arc::new(s) })
+    }
+
+    /// Writes the state file atomically (`murk fit --merge` reads it).
+    fn write(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
+        let s = self.inner.clone();
+        py.detach(move || s.write(&path))
+            .map_err(|e| errors::fit(&e))
+    }
+
+    /// The state file's bytes.
+    fn to_bytes<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyBytes>> {
+        let s = self.inner.clone();
+        let b = py
+            .detach(move || s.to_bytes())
+            .map_err(|e| errors::fit(&e))?;
+        Ok(PyBytes::new(py, &b))
+    }
+
+    /// A state from the bytes of a state file.
+    #[staticmethod]
+    #[pyo3(signature = (data, label="state bytes"))]
+    fn from_bytes(py: Python<'_>, data: &[u8], label: &str) -> PyResult<FitState> {
+        let s = py
+            .detach(|| murk_fit::FitState::from_bytes(data, label))
+            .map_err(|e| errors::fit(&e))?;
+        Ok(FitState { inner: Arc::new(s) })
+    }
+
+    /// Pickling: the state file's bytes.
+    fn __reduce__<'py>(&self, py: Python<'py>) -> PyResult<Reduced<'py>> {
+        let cls = py
+            .import("murk")?
+            .getattr("FitState")?
+            .getattr("from_bytes")?;
+        Ok((cls, (self.to_bytes(py)?, self.inner.label().to_string())))
+    }
+
+    /// This state merged with `other` (a new state; neither is changed).
+    /// Raises FitError when they are of different campaigns, parameters or
+    /// murk versions, hold the same recording, or were paired against
+    /// different clear references.
+    fn merge(&self, py: Python<'_>, other: &FitState) -> PyResult<FitState> {
+        let (a, b) = (self.inner.clone(), other.inner.clone());
+        let m = py
+            .detach(move || (*a).clone().merge((*b).clone()))
+            .map_err(|e| errors::fit(&e))?;
+        Ok(FitState { inner: Arc::new(m) })
+    }
+
+    /// The coefficient table of a complete state; FitError naming the
+    /// missing recordings otherwise.
+    #[pyo3(signature = (*, threads=None))]
+    fn finish(&self, py: Python<'_>, threads: Option<usize>) -> PyResult<Table> {
+        let s = self.inner.clone();
+        let table = py
+            .detach(|| {
+                pool::run(threads, || -> PyResult<CoefficientTable> {
+                    Ok(s.finish().map_err(|e| errors::fit(&e))?.table().clone())
+                })
+            })
+            .map_err(pool_err)??;
+        Ok(Table {
+            inner: Arc::new(table),
+            path: None,
+        })
+    }
+
+    /// Whether every selected recording is in the state.
+    #[getter]
+    fn complete(&self) -> bool {
+        self.inner.is_complete()
+    }
+
+    /// What the state lacks before it gives a table, or None.
+    #[getter]
+    fn missing(&self) -> Option<String> {
+        self.inner.missing_description()
+    }
+
+    /// Ids of the recordings in the state, in campaign order.
+    #[getter]
+    fn recordings(&self) -> Vec<String> {
+        self.inner.recordings()
+    }
+
+    /// The campaign's name.
+    #[getter]
+    fn campaign(&self) -> String {
+        self.inner.campaign().to_string()
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "<murk.FitState of {} recordings of {}{}>",
+            self.inner.recordings().len(),
+            self.inner.campaign(),
+            if self.inner.is_complete() {
+                ", complete"
+            } else {
+                ""
+            }
+        )
+    }
+}
+
+/// Maps part of a campaign into a FitState (`murk fit --partial`): without
+/// `reference` its clear recordings, with `reference` (a state holding every
+/// clear recording) its degraded ones, paired against it.
+#[pyfunction]
+#[pyo3(signature = (campaign, recordings=None, *, shard=None, reference=None, threads=None, **params))]
+fn fit_partial(
+    py: Python<'_>,
+    campaign: PathBuf,
+    recordings: Option<Vec<String>>,
+    shard: Option<(usize, usize)>,
+    reference: Option<&FitState>,
+    threads: Option<usize>,
+    params: Option<&Bound<'_, PyDict>>,
+) -> PyResult<FitState> {
+    let valid = fit_params(params)?;
+    let selection = match (recordings, shard) {
+        (Some(_), Some(_)) => {
+            return Err(input("give recordings or shard, not both"));
+        }
+        (Some(r), None) => murk_fit::Selection::Recordings(r),
+        (None, Some((k, n))) => murk_fit::Selection::parse_shard(&format!("{k}/{n}"))
+            .map_err(|e| input(format!("shard: {e}")))?,
+        (None, None) => murk_fit::Selection::All,
+    };
+    let reference = reference.map(|r| r.inner.clone());
+    let state = py
+        .detach(|| {
+            pool::run(threads, || -> PyResult<murk_fit::FitState> {
+                let c =
+                    murk_campaign::Campaign::open(&campaign).map_err(|e| errors::campaign(&e))?;
+                let inputs = murk_fit::FitInputs::from_campaign(&c);
+                valid
+                    .fit_partial(&inputs, &selection, reference.as_deref())
+                    .map_err(|e| errors::fit(&e))
+            })
+        })
+        .map_err(pool_err)??;
+    Ok(FitState {
+        inner: Arc::new(state),
     })
 }
 
@@ -823,6 +995,8 @@ fn _murk(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(plan, m)?)?;
     m.add_function(wrap_pyfunction!(apply_file, m)?)?;
     m.add_function(wrap_pyfunction!(fit, m)?)?;
+    m.add_function(wrap_pyfunction!(fit_partial, m)?)?;
+    m.add_class::<FitState>()?;
     m.add_function(wrap_pyfunction!(diagnose, m)?)?;
     m.add_function(wrap_pyfunction!(set_num_threads, m)?)?;
     m.add_function(wrap_pyfunction!(_rust_apply_seconds, m)?)?;

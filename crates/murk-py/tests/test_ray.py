@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import murk
-from conftest import REAL, scan
+from conftest import CAMPAIGN, REAL, scan
 
 ray = pytest.importorskip("ray", reason="ray is not installed (pip install 'murk[ray]')")
 import murk.ray  # noqa: E402
@@ -71,3 +71,9 @@ def test_ray_errors_are_raised_on_the_driver(tmp_path, fitted, local_ray):
     (tmp_path / "empty").mkdir()
     with pytest.raises(murk.InputError, match="no point-cloud file"):
         murk.ray.apply(tmp_path / "empty", tmp_path / "o", fitted, "fog", mor=30.0)
+
+
+def test_ray_fit_equals_cli(fitted, local_ray):
+    """Map (3 clear and 3 degraded shards) and merge on Ray: murk fit's bytes."""
+    t = murk.ray.fit(CAMPAIGN, shards=3, bootstrap=20)
+    assert t.to_json() == fitted.read_text()

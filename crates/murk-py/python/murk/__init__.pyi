@@ -180,6 +180,57 @@ def fit(campaign: PathLike, *, threads: Optional[int] = None, **params: Any) -> 
     per_band_width, fixed_dropout, bootstrap, seed, radar_tolerance.
     ``fit(c).to_json()`` equals the file ``murk fit c --out T.json`` writes."""
 
+class FitState:
+    """The statistics of part of a campaign's recordings (``murk fit --partial``).
+
+    Merging is associative and commutative; a complete state finishes into
+    the table one :func:`fit` over everything gives, byte for byte.
+    Picklable: its pickle is the state file's bytes.
+    """
+
+    @staticmethod
+    def read(path: PathLike) -> FitState:
+        """Read a state file (``murk fit --partial``'s output)."""
+    def write(self, path: PathLike) -> None:
+        """Write the state file atomically."""
+    def to_bytes(self) -> bytes:
+        """The state file's bytes."""
+    @staticmethod
+    def from_bytes(data: bytes, label: str = ...) -> FitState:
+        """A state from a state file's bytes; ``label`` names it in errors."""
+    def merge(self, other: FitState) -> FitState:
+        """Both states in one (FitError if of other campaigns, parameters or
+        murk versions, overlapping, or paired against different references)."""
+    def finish(self, *, threads: Optional[int] = None) -> Table:
+        """The table of a complete state (FitError naming what is missing)."""
+    @property
+    def complete(self) -> bool:
+        """Whether every selected recording is in the state."""
+    @property
+    def missing(self) -> Optional[str]:
+        """What the state lacks before it gives a table, or None."""
+    @property
+    def recordings(self) -> List[str]:
+        """Ids of the recordings in the state, in campaign order."""
+    @property
+    def campaign(self) -> str:
+        """The campaign's name."""
+    def __reduce__(self) -> Any: ...
+
+def fit_partial(
+    campaign: PathLike,
+    recordings: Optional[Sequence[str]] = None,
+    *,
+    shard: Optional[Tuple[int, int]] = None,
+    reference: Optional[FitState] = None,
+    threads: Optional[int] = None,
+    **params: Any,
+) -> FitState:
+    """Map part of a campaign (``murk fit --partial``): without ``reference``
+    its clear recordings (all, ``recordings`` by id, or ``shard=(k, n)``,
+    block k of n, 1-based), with ``reference`` (every clear recording,
+    merged) its degraded ones paired against it."""
+
 @overload
 def diagnose(
     campaign: PathLike,

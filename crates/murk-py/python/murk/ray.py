@@ -15,7 +15,13 @@ is byte-identical to what ``murk apply`` writes with the same flags, whatever
 the number of workers. On a cluster the input and output folders must be on a
 file system every node sees (NFS, a mounted bucket).
 
-Fitting as map/merge (partial fit states) is not available yet.
+:func:`fit` fits a campaign as map and merge on Ray: the clear recordings
+in ``shards`` blocks mapped into partial states and merged, then the degraded
+recordings in ``shards`` blocks mapped against the merged clear state, and
+everything merged (pairwise, in a tree of Ray tasks) and finished; the table
+is byte-identical to ``murk fit`` with the same parameters.
+
+>>> table = murk.ray.fit("campaign/", shards=8, bootstrap=1000)
 """
 
 from __future__ import annotations
@@ -25,7 +31,7 @@ from typing import Any, Dict, List, Optional, Sequence, Union
 
 import numpy as np
 
-from . import Table
+from . import FitState, Table
 from . import _murk
 
 PathLike = Union[str, "os.PathLike[str]"]
@@ -114,3 +120,58 @@ def apply(
         }
         for _, _, k in jobs
     ]
+
+
+def _map(campaign: str, k: int, n: int, reference: Optional[FitState], threads: int,
+         params: Dict[str, Any]) -> FitState:
+    return _murk.fit_partial(campaign, shard=(k, n), reference=reference, threads=threads, **params)
+
+
+def _merge(a: FitState, b: FitState) -> FitState:
+    return a.merge(b)
+
+
+def _finish(state: FitState, threads: int) -> str:
+    return state.finish(threads=threads).to_json()
+
+
+def _tree(refs: List[Any], merge: Any) -> Any:
+    """Pairwise merges as Ray tasks until one state is left (log depth)."""
+    while len(refs) > 1:
+        nxt = [merge.remote(refs[i], refs[i + 1]) for i in range(0, len(refs) - 1, 2)]
+        if len(refs) % 2:
+            nxt.append(refs[-1])
+        refs = nxt
+    return refs[0]
+
+
+def fit(campaign: PathLike, shards: int = 8, *, threads: int = 1, **params: Any) -> Table:
+    """Fit ``campaign`` as map and merge on Ray: byte-identical to
+    ``murk fit`` (and :func:`murk.fit`) with the same ``params`` (its flags as
+    keywords).
+
+    Phase 1 maps the clear recordings in ``shards`` blocks (Ray tasks of
+    ``threads`` murk threads each) and merges them into the clear state;
+    phase 2 maps the degraded recordings in ``shards`` blocks against it;
+    every state is then merged pairwise in a tree of Ray tasks and
+    finished. On a cluster the campaign folder must be on a file system
+    every node sees. Raises murk errors as :func:`murk.fit_partial` does.
+    """
+    import ray
+
+    if shards < 1:
+        raise _murk.InputError(f"shards: {shards} must be at least 1")
+    campaign = os.fspath(campaign)
+    # Check the parameters on the driver, not in a task.
+    _murk.fit_partial(campaign, [], **params)
+    if not ray.is_initialized():
+        ray.init()
+    map_task = ray.remote(num_cpus=threads)(_map)
+    merge_task = ray.remote(num_cpus=threads)(_merge)
+    finish_task = ray.remote(num_cpus=threads)(_finish)
+    clear = _tree([map_task.remote(campaign, k, shards, None, threads, params)
+                   for k in range(1, shards + 1)], merge_task)
+    degraded = [map_task.remote(campaign, k, shards, clear, threads, params)
+                for k in range(1, shards + 1)]
+    whole = _tree([clear] + degraded, merge_task)
+    return Table.from_json(ray.get(finish_task.remote(whole, threads)))
