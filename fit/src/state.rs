@@ -643,9 +643,9 @@ impl FitState {
                 d.len(),
                 degraded_positions(inputs).len(),
                 names(inputs, &d),
-                match self.body.clear.is_empty() {
-                    true => "",
-                    false => "; map them with this state's clear part as the reference",
+                match c.is_empty() && !self.body.clear.is_empty() {
+                    true => ": map them with this state (its clear part) as the reference",
+                    false => "",
                 }
             ));
         }
