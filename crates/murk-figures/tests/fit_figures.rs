@@ -176,6 +176,7 @@ fn g(mean: f64, std: f64, lower: Option<f64>, upper: Option<f64>) -> Gaussian {
         upper,
         mean_std_error: None,
         std_std_error: None,
+        reason: None,
     }
 }
 
