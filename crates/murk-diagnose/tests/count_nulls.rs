@@ -104,3 +104,84 @@ fn null_campaigns_show_no_count_along_mor() {
     }
     assert_eq!(flagged, 0, "{lines:#?}");
 }
+
+/// A fog campaign whose MOR readings all fall in 60–74 m (as narrow in
+/// ln MOR as the real capture's 304–378 m, but dense enough for every
+/// band's edge to lie in the scene, so the slopes exist), with few ghost
+/// returns and no ring return at all: fit gives a finite count law or a
+/// null one with its reason (never a failed table), `murk apply`'s applier
+/// builds from it and adds near-range returns, and the diagnosis runs.
+#[test]
+fn a_narrow_mor_range_and_a_weather_without_ring_returns_run_end_to_end() {
+    use murk_fixtures::Law;
+    use murk_infer::{ApplyParams, Severity};
+    let mut c = GeneratorConfig::preset(Preset::Small);
+    c.campaign.recordings = 40;
+    c.weather.mix = PerClass {
+        clear: 0.25,
+        fog: 0.75,
+        rain: 0.0,
+        snow: 0.0,
+    };
+    c.weather.mor_m.fog = Law::Uniform {
+        min: 60.0,
+        max: 74.0,
+    };
+    c.degradation.fog.ghost.count.n_ref = 1.0;
+    c.degradation.fog.ring.count.n_ref = 0.0;
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("campaign");
+    Generator::new(c)
+        .unwrap()
+        .write_campaign(5, &OutputOptions::new(&out))
+        .unwrap();
+    let campaign = Campaign::open(&out).unwrap();
+    let fitted = murk_fit::FitParams::default()
+        .bootstrap_replicates(20)
+        .check()
+        .unwrap()
+        .fit(&campaign)
+        .unwrap();
+    let table = fitted.table().clone();
+    let fog = &table.weathers[&WeatherClass::Fog];
+    assert!(fog.ring.is_none() && fog.ring_reason.is_some(), "{fog:?}");
+    let ghost = fog.ghost.as_ref().expect("a few ghost returns");
+    if ghost.count_law.is_none() {
+        let r = ghost.count_law_reason.as_deref().unwrap();
+        assert!(r.starts_with("not identifiable"), "{r}");
+    }
+    eprintln!(
+        "narrow: ghost count law {:?}, reason {:?}",
+        ghost.count_law, ghost.count_law_reason
+    );
+    // Apply at a MOR inside and one far outside the range.
+    let mut cloud = murk_types::PointCloud::with_capacity(16 * 360);
+    let spec = murk_types::LidarSpec::vlp16();
+    for bin in 0..360 {
+        let az = (bin as f64).to_radians();
+        for (ring, el) in spec.elevation_deg.iter().enumerate() {
+            let el = el.to_radians();
+            let r = 20.0 / el.cos();
+            cloud.push(
+                (r * el.cos() * az.cos()) as f32,
+                (r * el.cos() * az.sin()) as f32,
+                (r * el.sin()) as f32,
+                40.0,
+                ring as u16,
+            );
+        }
+    }
+    for mor in [67.0, 500.0, 10.0] {
+        let a = ApplyParams::new(WeatherClass::Fog, Severity::Mor(mor))
+            .near_range(true)
+            .seed(1)
+            .build(&table)
+            .unwrap();
+        let (_, s) = a.apply(&cloud, "scan").unwrap();
+        let g = s.ghost.expect("ghost returns are applied");
+        assert!(g.expected.is_finite(), "{g:?}");
+    }
+    let d = diagnose(&out, WeatherClass::Fog, 5);
+    let (line, _) = count_mor(&d, "narrow fog seed 5");
+    eprintln!("{line}");
+}
