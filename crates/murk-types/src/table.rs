@@ -1193,6 +1193,48 @@ mod tests {
     }
 
     #[test]
+    fn an_old_power_law_loads_and_evaluates_as_before() {
+        // A law as tables without intervals or a choice wrote it.
+        let c: CountLaw = serde_json::from_str(
+            r#"{ "law": "power", "n_ref": 41.0, "mor_ref_m": 100.0, "exponent": 1.5,
+                 "n_ref_std_error": 1.0, "exponent_std_error": 0.1 }"#,
+        )
+        .unwrap();
+        assert_eq!(c.family(), "power");
+        assert!((c.expected(25.0) - 41.0 * 4f64.powf(1.5)).abs() < 1e-9);
+    }
+
+    #[test]
+    fn the_onset_law_evaluates_its_formula_and_is_validated() {
+        let law = |steep: f64| CountLaw::Onset {
+            n_ref: 40.0,
+            mor_ref_m: 100.0,
+            exponent: 0.5,
+            onset_mor_m: 120.0,
+            onset_steepness: steep,
+            n_ref_ci95: None,
+            exponent_ci95: None,
+            onset_mor_ci95: None,
+            onset_steepness_ci95: None,
+        };
+        for mor in [10.0f64, 120.0, 1e4] {
+            let want = 40.0 * (100.0 / mor).powf(0.5) / (1.0 + (mor / 120.0f64).powf(4.0));
+            assert!((law(4.0).expected(mor) / want - 1.0).abs() < 1e-12, "{mor}");
+        }
+        // A steep onset far above its MOR does not overflow.
+        let far = law(50.0).expected(1e6);
+        assert!(far.is_finite() && far < 1e-100, "{far}");
+        let mut t = table();
+        let fog = t.weathers.get_mut(&WeatherClass::Fog).unwrap();
+        fog.ghost.as_mut().unwrap().count_law = Some(law(0.0));
+        let e = t.validate().unwrap_err().to_string();
+        assert!(e.contains("ghost.count_law.onset_steepness"), "{e}");
+        let fog = t.weathers.get_mut(&WeatherClass::Fog).unwrap();
+        fog.ghost.as_mut().unwrap().count_law = Some(law(4.0));
+        t.validate().unwrap();
+    }
+
+    #[test]
     fn rate_above_one_is_rejected() {
         let mut t = table();
         t.weathers
