@@ -174,3 +174,57 @@ fn tables_are_the_same_bytes_on_one_and_two_threads() {
         "tables differ between 1 and 2 threads"
     );
 }
+
+#[test]
+fn real_frames_at_a_narrow_mor_range_give_a_table() {
+    // The issue's case: the real capture's revolutions labelled fog at MOR
+    // 304–378 m, weathered by the ground-truth fog model (few near returns
+    // at that visibility). Before, the fit stopped with "count_law: n_ref
+    // inf must be finite"; now every count law is finite or null with its
+    // reason, and every near-range law pinned down or flagged.
+    let Some(capture) = murk_fixtures::semi_real::vlp16_capture(env!("CARGO_MANIFEST_DIR")) else {
+        return;
+    };
+    for (seed, null_weather) in [(7, false), (8, true)] {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("semi-real");
+        let cfg = murk_fixtures::semi_real::SemiRealConfig {
+            mor_m: [304.0, 378.0],
+            declared_azimuth_deg: 0.4,
+            null_weather,
+            ..Default::default()
+        };
+        murk_fixtures::semi_real::vlp16_campaign(&capture, &out, &cfg, seed).unwrap();
+        let t = fit(&out).table().clone();
+        t.validate().unwrap();
+        let fog = &t.weathers[&WeatherClass::Fog];
+        for (name, law, reason) in [
+            ("ghost", &fog.ghost, &fog.ghost_reason),
+            ("ring", &fog.ring, &fog.ring_reason),
+        ] {
+            match law {
+                Some(l) => {
+                    eprintln!(
+                        "seed {seed} (null {null_weather}) {name}: count law {:?}, reason {:?}, distance reason {:?}, reflectivity reason {:?}",
+                        l.count_law, l.count_law_reason, l.distance_m.reason, l.reflectivity.reason
+                    );
+                    if let Some(c) = &l.count_law {
+                        assert!(c.expected(340.0).is_finite(), "{c:?}");
+                    } else {
+                        assert!(l.count_law_reason.is_some());
+                    }
+                    for (what, g) in [
+                        ("distance", &l.distance_m),
+                        ("reflectivity", &l.reflectivity),
+                    ] {
+                        check_gaussian(g, l.points, &format!("seed {seed} {name} {what}")).unwrap();
+                    }
+                }
+                None => {
+                    eprintln!("seed {seed} (null {null_weather}) {name}: null, {reason:?}");
+                    assert!(reason.is_some());
+                }
+            }
+        }
+    }
+}
