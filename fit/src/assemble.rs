@@ -1,8 +1,9 @@
 //! From accumulated statistics to the coefficient table (no I/O).
 
 use murk_types::{
-    CountLaw, EdgeTest, Gaussian, Interval, MorBin, NoiseLaw, RainConversion, SlopeBand,
-    SurvivalFit, SweepBand, Uncertainty, WeatherClass, WeatherCoefficients,
+    CountLaw, CountLawChoice, EdgeTest, Gaussian, Interval, MorBin, NoiseLaw, RainConversion,
+    ReturnMoments, SlopeBand, SurvivalFit, SweepBand, Uncertainty, WeatherClass,
+    WeatherCoefficients,
 };
 
 use crate::FitValidParams;
@@ -13,12 +14,12 @@ use crate::hyperparams::Band;
 use crate::quantile_slope::{BandCells, BinQuantile, MorBinStats, bin_quantile, quantile_slope};
 use crate::reference::ClearReference;
 use crate::stats::bootstrap::{RateUncertainty, bootstrap_rate};
-use crate::stats::counts::{CountLawFailure, fit_power_law_exposed};
+use crate::stats::counts::{CountFit, CountLawFailure, Family, fit_count_law};
 use crate::stats::dist::normal_cdf;
 use crate::stats::regress::line;
 use crate::stats::truncnorm::{
-    Visibility, fit_truncated_normal, fit_truncated_normal_rounded, fit_truncated_normal_seen,
-    is_quantized,
+    Histogram, NormalFit, Visibility, degeneracy, fit_truncated_normal,
+    fit_truncated_normal_rounded, fit_truncated_normal_seen, is_quantized,
 };
 use crate::survival::{
     EdgeEvidence, Partition, RecordingTrials, RobustIntervals, SurvivalOptions, SurvivalResult,
@@ -241,8 +242,110 @@ fn row_visibility(row: &RecordingRow, mu: f64, sigma: f64, lo: f64, hi: f64) -> 
     seen / all
 }
 
+/// The table's form of a fitted count law, with its intervals.
+fn table_count_law(f: &CountFit) -> CountLaw {
+    let iv = |c: Option<[f64; 2]>| {
+        c.filter(|c| c[0].is_finite() && c[1].is_finite())
+            .map(|c| Interval {
+                low: c[0],
+                high: c[1],
+                level: 0.95,
+                method: f.method.to_string(),
+            })
+    };
+    let finite = |x: Option<f64>| x.filter(|x| x.is_finite());
+    match f.family {
+        Family::Power => CountLaw::Power {
+            n_ref: f.n_ref(),
+            mor_ref_m: f.mor_ref,
+            exponent: f.exponent(),
+            n_ref_std_error: finite(f.n_ref_std_error()),
+            exponent_std_error: finite(f.exponent_std_error()),
+            n_ref_ci95: iv(f.n_ref_ci()),
+            exponent_ci95: iv(f.exponent_ci()),
+        },
+        Family::Onset => CountLaw::Onset {
+            n_ref: f.n_ref(),
+            mor_ref_m: f.mor_ref,
+            exponent: f.exponent(),
+            onset_mor_m: f.onset_mor().unwrap_or(f64::NAN),
+            onset_steepness: f.onset_steepness().unwrap_or(f64::NAN),
+            n_ref_ci95: iv(f.n_ref_ci()),
+            exponent_ci95: iv(f.exponent_ci()),
+            onset_mor_ci95: iv(f.onset_mor_ci()),
+            onset_steepness_ci95: iv(f.onset_steepness_ci()),
+        },
+    }
+}
+
+/// Mean and population standard deviation of a histogram's values (bin
+/// centres; integer values when the histogram holds integers).
+fn histogram_moments(h: &Histogram) -> (f64, f64) {
+    let shift = if is_quantized(h, 1.0) {
+        -0.5 * h.width()
+    } else {
+        0.0
+    };
+    let n = h.total().max(1) as f64;
+    let mean = h.bins().map(|(x, c)| (x + shift) * c as f64).sum::<f64>() / n;
+    let var = h
+        .bins()
+        .map(|(x, c)| c as f64 * (x + shift - mean).powi(2))
+        .sum::<f64>()
+        / n;
+    (mean, var.sqrt())
+}
+
+/// The seed's Table 5 moments of the returns themselves.
+fn return_moments(acc: &NoiseAcc) -> Option<ReturnMoments> {
+    let n = acc.distance.total();
+    if n == 0 {
+        return None;
+    }
+    let (dm, ds) = histogram_moments(&acc.distance);
+    let (rm, rs) = histogram_moments(&acc.reflectivity);
+    Some(ReturnMoments {
+        points: n,
+        distance_mean_m: dm,
+        distance_std_m: ds,
+        reflectivity_mean: rm,
+        reflectivity_std: rs,
+    })
+}
+
+/// The table's Gaussian for a truncated fit on `[lo, hi)`: the fitted law,
+/// or, when [`degeneracy`] says the data cannot pin it down, the returns'
+/// own moments with the reason.
+fn table_gaussian(f: &NormalFit, h: &Histogram, lo: f64, hi: f64) -> Gaussian {
+    let upper = hi.is_finite().then_some(hi);
+    match degeneracy(f, lo, hi) {
+        None => Gaussian {
+            mean: f.mean,
+            std: f.std,
+            lower: Some(lo),
+            upper,
+            mean_std_error: f.mean_std_error.is_finite().then_some(f.mean_std_error),
+            std_std_error: f.std_std_error.is_finite().then_some(f.std_std_error),
+            reason: None,
+        },
+        Some(reason) => {
+            let (m, sd) = histogram_moments(h);
+            Gaussian {
+                mean: m,
+                std: sd.max(h.width()),
+                lower: Some(lo),
+                upper,
+                mean_std_error: None,
+                std_std_error: None,
+                reason: Some(reason),
+            }
+        }
+    }
+}
+
 fn noise_law(
     name: &str,
+    weather: &str,
     acc: &NoiseAcc,
     window: [f64; 2],
     floor: f64,
@@ -270,6 +373,20 @@ fn noise_law(
     let r = r.ok_or_else(|| {
         format!("{n} {name} returns are too few or too concentrated for a reflectivity law")
     })?;
+    let distance_m = table_gaussian(&d, &acc.distance, window[0], window[1]);
+    let reflectivity = table_gaussian(&r, &acc.reflectivity, floor, f64::INFINITY);
+    // The visibility of the law that is published.
+    let visible = if distance_m.reason.is_some() {
+        let vis = v.as_deref().map(|v| Visibility {
+            step: OCCLUDER_STEP_M,
+            v,
+        });
+        vis.map_or(1.0, |vis| {
+            vis.visible_share(distance_m.mean, distance_m.std, window[0], window[1])
+        })
+    } else {
+        d.visible
+    };
     // Counts per revolution: a recording of many revolutions (a one-minute
     // `.pcap` holds ~600) contributes its count over its revolutions.
     let all: f64 = counts.iter().map(|c| c.1 as f64).sum();
@@ -285,57 +402,52 @@ fn noise_law(
             (
                 row.mor,
                 *c,
-                row_visibility(row, d.mean, d.std, window[0], window[1])
+                row_visibility(row, distance_m.mean, distance_m.std, window[0], window[1])
                     * row.revolutions.max(1) as f64,
             )
         })
         .collect();
-    let (count_law, count_law_reason) =
-        match fit_power_law_exposed(&exposed, params.count_mor_ref_m()) {
-            Ok(p) => (
-                Some(CountLaw::Power {
-                    n_ref: p.n_ref,
-                    mor_ref_m: p.mor_ref,
-                    exponent: p.exponent,
-                    n_ref_std_error: p.n_ref_std_error.is_finite().then_some(p.n_ref_std_error),
-                    exponent_std_error: p
-                        .exponent_std_error
-                        .is_finite()
-                        .then_some(p.exponent_std_error),
-                }),
+    let seed = murk_types::seed::derive(
+        params.seed(),
+        &murk_types::seed::key(&["count-law", weather, name]),
+        murk_types::seed::Purpose::Bootstrap,
+    )
+    .bytes();
+    let (count_law, count_law_reason, count_law_choice) =
+        match fit_count_law(&exposed, params.count_mor_ref_m(), seed) {
+            Ok((f, c)) => (
+                Some(table_count_law(&f)),
                 None,
+                Some(CountLawChoice {
+                    chosen: f.family.name().to_string(),
+                    folds: c.folds as u32,
+                    power_heldout_log_likelihood: c.power_ll,
+                    onset_heldout_log_likelihood: c.onset_ll,
+                    onset_gain_p: c.onset_p,
+                    reason: c.reason,
+                }),
             ),
-            Err(CountLawFailure::NoCounts) => (None, Some("no count".to_string())),
+            Err(CountLawFailure::NoCounts) => (None, Some("no count".to_string()), None),
             Err(CountLawFailure::SingleMor) => (
                 None,
                 Some(
-                    "every recording has the same MOR: the exponent is not determined".to_string(),
+                    "not identifiable: every recording has the same MOR, so the exponent is not determined"
+                        .to_string(),
                 ),
+                None,
             ),
+            Err(CountLawFailure::NotIdentifiable(r)) => (None, Some(r), None),
         };
     Ok(NoiseLaw {
-        distance_m: Gaussian {
-            mean: d.mean,
-            std: d.std,
-            lower: Some(window[0]),
-            upper: Some(window[1]),
-            mean_std_error: d.mean_std_error.is_finite().then_some(d.mean_std_error),
-            std_std_error: d.std_std_error.is_finite().then_some(d.std_std_error),
-        },
-        reflectivity: Gaussian {
-            mean: r.mean,
-            std: r.std,
-            lower: Some(floor),
-            upper: None,
-            mean_std_error: r.mean_std_error.is_finite().then_some(r.mean_std_error),
-            std_std_error: r.std_std_error.is_finite().then_some(r.std_std_error),
-        },
+        distance_m,
+        reflectivity,
         points_per_scan: per_scan,
         points_per_recording: Some(per_recording),
         points: n,
-        visible_fraction: Some(d.visible),
+        visible_fraction: Some(visible),
         count_law,
         count_law_reason,
+        count_law_choice,
     })
 }
 
@@ -673,13 +785,22 @@ pub fn weather(
     let floor = p.reflectivity_floor();
     let ghost = noise_law(
         "ghost",
+        cx.class.name(),
         &acc.ghost,
         p.ghost_range_m(),
         floor,
         &ghost_counts,
         p,
     );
-    let ring = noise_law("ring", &acc.ring, p.ring_range_m(), floor, &ring_counts, p);
+    let ring = noise_law(
+        "ring",
+        cx.class.name(),
+        &acc.ring,
+        p.ring_range_m(),
+        floor,
+        &ring_counts,
+        p,
+    );
 
     let (mor_from_rain_rate, mor_from_rain_rate_reason) = match &cx.rain {
         Some(Ok(c)) => (Some(c.clone()), None),
@@ -708,8 +829,10 @@ pub fn weather(
         no_change_rate_reason,
         ghost: ghost.as_ref().ok().cloned(),
         ghost_reason: ghost.err(),
+        ghost_returns: return_moments(&acc.ghost),
         ring: ring.as_ref().ok().cloned(),
         ring_reason: ring.err(),
+        ring_returns: return_moments(&acc.ring),
         mor_from_rain_rate,
         mor_from_rain_rate_reason,
         reflectivity_sweep,

@@ -234,6 +234,7 @@ fn seed_tables_campaign_gives_the_seed_values_back() {
                 exponent,
                 exponent_std_error,
                 n_ref_std_error,
+                ..
             }) = law.count_law
             else {
                 panic!("{class} {name}: no count law: {:?}", law.count_law_reason);

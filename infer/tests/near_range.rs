@@ -178,6 +178,8 @@ fn count_is_poisson_with_the_count_law_mean() {
         exponent: 1.5,
         n_ref_std_error: None,
         exponent_std_error: None,
+        n_ref_ci95: None,
+        exponent_ci95: None,
     });
     let c = wall(2.0);
     let mut total = 0;

@@ -218,8 +218,18 @@ pub fn law_not_pinned(g: &Gaussian) -> Option<String> {
 }
 
 /// The law to draw for a table Gaussian: fitted, or a note why not.
+///
+/// The fit's own verdict (`reason` on the Gaussian) comes first; tables
+/// written before it existed are judged by [`law_not_pinned`].
 pub fn panel_law(g: &Gaussian) -> PanelLaw {
-    match law_not_pinned(g) {
+    let fitted = g.reason.as_ref().map(|r| {
+        format!(
+            "{r}; the returns' own mean {}, std {}",
+            short(g.mean),
+            short(g.std)
+        )
+    });
+    match fitted.or_else(|| law_not_pinned(g)) {
         Some(why) => PanelLaw::Unknown(why),
         None => PanelLaw::Fitted {
             mean: g.mean,

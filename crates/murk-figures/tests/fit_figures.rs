@@ -176,6 +176,21 @@ fn g(mean: f64, std: f64, lower: Option<f64>, upper: Option<f64>) -> Gaussian {
         upper,
         mean_std_error: None,
         std_std_error: None,
+        reason: None,
+    }
+}
+
+#[test]
+fn the_fits_own_verdict_is_shown() {
+    let mut flagged = g(6.7, 2.1, Some(3.0), Some(10.0));
+    flagged.reason =
+        Some("not identifiable: ML mean 2.8659e4 puts 1.0e-300 of its mass in the window".into());
+    match murk_figures::table::panel_law(&flagged) {
+        PanelLaw::Unknown(why) => assert!(
+            why.starts_with("not identifiable") && why.contains("own mean 6.7"),
+            "{why}"
+        ),
+        other => panic!("{other:?}"),
     }
 }
 

@@ -70,10 +70,10 @@ pub use format::{BinLayout, PointFormat};
 pub use intensity::IntensityScale;
 pub use lidar::LidarSpec;
 pub use table::{
-    ClearCoefficients, CoefficientTable, CountLaw, CountUnit, EdgeTest, ExcludedRecording,
-    Gaussian, InputDigest, Interval, MorBin, NoiseLaw, Provenance, RadarCoefficients,
-    RainConversion, RingGeometry, SensorGeometry, SlopeBand, SurvivalFit, SweepBand, TABLE_FORMAT,
-    TableLidar, Uncertainty, WeatherCoefficients,
+    ClearCoefficients, CoefficientTable, CountLaw, CountLawChoice, CountUnit, EdgeTest,
+    ExcludedRecording, Gaussian, InputDigest, Interval, MorBin, NoiseLaw, Provenance,
+    RadarCoefficients, RainConversion, ReturnMoments, RingGeometry, SensorGeometry, SlopeBand,
+    SurvivalFit, SweepBand, TABLE_FORMAT, TableLidar, Uncertainty, WeatherCoefficients,
 };
 pub use walk::{LeftOut, Walk, WalkedFile, walk_folder};
 pub use weather::WeatherClass;

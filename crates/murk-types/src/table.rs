@@ -171,12 +171,20 @@ pub struct WeatherCoefficients {
     /// Why `ghost` is null.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ghost_reason: Option<String>,
+    /// Moments of the ghost returns themselves (Table 5), present whenever
+    /// any was seen, also when `ghost` is null.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ghost_returns: Option<ReturnMoments>,
     /// Ring ("fake wall") returns (no clear counterpart, in the ring window);
     /// null when none were found.
     pub ring: Option<NoiseLaw>,
     /// Why `ring` is null.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ring_reason: Option<String>,
+    /// Moments of the ring returns themselves (Table 5), present whenever
+    /// any was seen, also when `ring` is null.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ring_returns: Option<ReturnMoments>,
     /// `MOR = slope · R + intercept` from recordings with both a rain rate and
     /// a MOR (rain only).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -392,6 +400,13 @@ pub struct Gaussian {
     /// Standard error of `std`, when fitted.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub std_std_error: Option<f64>,
+    /// Set when the data cannot pin the truncated law down (`not
+    /// identifiable: …`, with the numbers the fit gave): `mean` and `std`
+    /// are then the returns' own moments, not a fitted law — applied inside
+    /// the truncation they give back roughly the returns seen — and the
+    /// standard errors are null.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
 }
 
 /// Ghost or ring returns of one weather: their laws and how many there are.
@@ -424,9 +439,21 @@ pub struct NoiseLaw {
     /// Why `count_law` is null.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub count_law_reason: Option<String>,
+    /// How the count law's family was chosen (null in older tables and
+    /// where no law could be fitted).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub count_law_choice: Option<CountLawChoice>,
 }
 
 /// Expected number of returns per scan as a function of MOR.
+///
+/// Two families: the seed's [`CountLaw::Power`] and [`CountLaw::Onset`], a
+/// power law times a smooth onset in ln MOR (returns that appear only below
+/// some MOR, or saturate in dense weather). The power law is the onset law's
+/// limit as `onset_mor_m` grows without bound; `murk fit` chooses between
+/// them per weather and law by held-out likelihood over recordings
+/// ([`CountLawChoice`]). [`CountLaw::expected`] is the one evaluation every
+/// applier and the diagnosis use.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "law", rename_all = "lowercase")]
 #[non_exhaustive]
@@ -439,19 +466,56 @@ pub enum CountLaw {
         mor_ref_m: f64,
         /// Power-law exponent.
         exponent: f64,
-        /// Standard error of `n_ref` (Poisson likelihood curvature), when
-        /// fitted.
+        /// Standard error of `n_ref`, when fitted: cluster-robust over
+        /// recordings in tables that carry `n_ref_ci95`, the Poisson
+        /// likelihood's curvature in older ones.
         #[serde(default, skip_serializing_if = "Option::is_none")]
         n_ref_std_error: Option<f64>,
         /// Standard error of `exponent`, when fitted: a narrow MOR range
         /// leaves the exponent loose, and this says how loose.
         #[serde(default, skip_serializing_if = "Option::is_none")]
         exponent_std_error: Option<f64>,
+        /// 95 % interval of `n_ref` over recordings.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        n_ref_ci95: Option<Interval>,
+        /// 95 % interval of `exponent` over recordings.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        exponent_ci95: Option<Interval>,
+    },
+    /// `N(MOR) = n_ref · (mor_ref_m / MOR)^exponent / (1 + (MOR / onset_mor_m)^onset_steepness)`:
+    /// the power law switched on below `onset_mor_m` (where the factor is
+    /// ½), over a width of about `1 / onset_steepness` in ln MOR. With
+    /// `exponent` 0 the count saturates at `n_ref` in dense weather; with a
+    /// negative exponent it peaks at intermediate MOR.
+    Onset {
+        /// Scale: the power-law part's count at `mor_ref_m`.
+        n_ref: f64,
+        /// Reference MOR, metres.
+        mor_ref_m: f64,
+        /// Exponent of the power-law part.
+        exponent: f64,
+        /// MOR at which the onset factor is ½, metres.
+        onset_mor_m: f64,
+        /// Steepness of the onset in ln MOR (> 0).
+        onset_steepness: f64,
+        /// 95 % interval of `n_ref` over recordings.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        n_ref_ci95: Option<Interval>,
+        /// 95 % interval of `exponent` over recordings.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        exponent_ci95: Option<Interval>,
+        /// 95 % interval of `onset_mor_m` over recordings.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        onset_mor_ci95: Option<Interval>,
+        /// 95 % interval of `onset_steepness` over recordings.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        onset_steepness_ci95: Option<Interval>,
     },
 }
 
 impl CountLaw {
-    /// Expected count per scan at `mor_m`.
+    /// Expected count per scan at `mor_m` (computed in log space, so a
+    /// steep onset does not overflow).
     pub fn expected(&self, mor_m: f64) -> f64 {
         match *self {
             CountLaw::Power {
@@ -460,8 +524,78 @@ impl CountLaw {
                 exponent,
                 ..
             } => n_ref * (mor_ref_m / mor_m).powf(exponent),
+            CountLaw::Onset {
+                n_ref,
+                mor_ref_m,
+                exponent,
+                onset_mor_m,
+                onset_steepness,
+                ..
+            } => {
+                if n_ref <= 0.0 {
+                    return 0.0;
+                }
+                let u = onset_steepness * (mor_m / onset_mor_m).ln();
+                // ln(1 + e^u), stable for large |u|.
+                let softplus = if u > 0.0 {
+                    u + (-u).exp().ln_1p()
+                } else {
+                    u.exp().ln_1p()
+                };
+                (n_ref.ln() + exponent * (mor_ref_m / mor_m).ln() - softplus).exp()
+            }
         }
     }
+
+    /// The family's name as written in the table (`power`, `onset`).
+    pub fn family(&self) -> &'static str {
+        match self {
+            CountLaw::Power { .. } => "power",
+            CountLaw::Onset { .. } => "onset",
+        }
+    }
+}
+
+/// How `murk fit` chose a count law's family: the held-out Poisson
+/// log-likelihood over recordings of each candidate (recordings split into
+/// folds by MOR rank; each fold predicted by the law fitted on the others).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CountLawChoice {
+    /// Family chosen (`power`, `onset`).
+    pub chosen: String,
+    /// Folds of the held-out comparison.
+    pub folds: u32,
+    /// Held-out log-likelihood of the power law, nats summed over
+    /// recordings (up to the counts' constant).
+    pub power_heldout_log_likelihood: f64,
+    /// Same for the onset law (null when it was not tried or could not be
+    /// fitted on some fold).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub onset_heldout_log_likelihood: Option<f64>,
+    /// One-sided sign-flip p-value over recordings of the onset law's
+    /// per-recording held-out gain.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub onset_gain_p: Option<f64>,
+    /// Why the family was chosen.
+    pub reason: String,
+}
+
+/// Moments of the near-range returns themselves (what the seed's Table 5
+/// reports), beside the truncated laws fitted to them: they describe only
+/// the part of a law inside its window, so a truncated mean below zero or
+/// beyond the window reads against these.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ReturnMoments {
+    /// Returns.
+    pub points: u64,
+    /// Mean range of the returns, metres.
+    pub distance_mean_m: f64,
+    /// Standard deviation of their range, metres.
+    pub distance_std_m: f64,
+    /// Mean calibrated reflectivity of the returns.
+    pub reflectivity_mean: f64,
+    /// Standard deviation of their reflectivity.
+    pub reflectivity_std: f64,
 }
 
 /// Linear conversion of a rain rate to an equivalent MOR.
@@ -700,21 +834,8 @@ impl CoefficientTable {
                         &format!("{at}.{name}.points_per_scan"),
                         || format!("{} must be a finite count ≥ 0", l.points_per_scan),
                     );
-                    if let Some(CountLaw::Power {
-                        n_ref,
-                        mor_ref_m,
-                        exponent,
-                        ..
-                    }) = &l.count_law
-                    {
-                        let f = format!("{at}.{name}.count_law");
-                        v.check(n_ref.is_finite() && *n_ref >= 0.0, &f, || {
-                            format!("n_ref {n_ref} must be finite and ≥ 0")
-                        });
-                        v.positive(Some(*mor_ref_m), &format!("{f}.mor_ref_m"));
-                        v.check(exponent.is_finite(), &f, || {
-                            format!("exponent {exponent} is not finite")
-                        });
+                    if let Some(law) = &l.count_law {
+                        v.count_law(law, &format!("{at}.{name}.count_law"));
                     }
                 }
             }
@@ -778,6 +899,36 @@ impl Validator {
                 format!("{x} is not a rate in [0, 1]")
             });
         }
+    }
+
+    fn count_law(&mut self, law: &CountLaw, f: &str) {
+        let (n_ref, mor_ref_m, exponent) = match law {
+            CountLaw::Power {
+                n_ref,
+                mor_ref_m,
+                exponent,
+                ..
+            } => (*n_ref, *mor_ref_m, *exponent),
+            CountLaw::Onset {
+                n_ref,
+                mor_ref_m,
+                exponent,
+                onset_mor_m,
+                onset_steepness,
+                ..
+            } => {
+                self.positive(Some(*onset_mor_m), &format!("{f}.onset_mor_m"));
+                self.positive(Some(*onset_steepness), &format!("{f}.onset_steepness"));
+                (*n_ref, *mor_ref_m, *exponent)
+            }
+        };
+        self.check(n_ref.is_finite() && n_ref >= 0.0, f, || {
+            format!("n_ref {n_ref} must be finite and ≥ 0")
+        });
+        self.positive(Some(mor_ref_m), &format!("{f}.mor_ref_m"));
+        self.check(exponent.is_finite(), f, || {
+            format!("exponent {exponent} is not finite")
+        });
     }
 
     fn gaussian(&mut self, g: &Gaussian, field: &str) {
@@ -859,6 +1010,7 @@ mod tests {
                 upper: Some(10.0),
                 mean_std_error: None,
                 std_std_error: None,
+                reason: None,
             },
             reflectivity: Gaussian {
                 mean: 4.0,
@@ -867,6 +1019,7 @@ mod tests {
                 upper: None,
                 mean_std_error: None,
                 std_std_error: None,
+                reason: None,
             },
             points_per_scan: 41.0,
             points_per_recording: Some(41.0),
@@ -878,8 +1031,11 @@ mod tests {
                 exponent: 1.5,
                 n_ref_std_error: None,
                 exponent_std_error: None,
+                n_ref_ci95: None,
+                exponent_ci95: None,
             }),
             count_law_reason: None,
+            count_law_choice: None,
         }
     }
 
@@ -908,8 +1064,10 @@ mod tests {
             no_change_rate_reason: None,
             ghost: Some(law(5.011, 1.753)),
             ghost_reason: None,
+            ghost_returns: None,
             ring: None,
             ring_reason: Some("no ring returns".into()),
+            ring_returns: None,
             mor_from_rain_rate: None,
             mor_from_rain_rate_reason: None,
             reflectivity_sweep: vec![],
@@ -1032,6 +1190,48 @@ mod tests {
         fog.ghost.as_mut().unwrap().distance_m.std = 0.0;
         let e = t.validate().unwrap_err().to_string();
         assert!(e.contains("ghost.distance_m.std"), "{e}");
+    }
+
+    #[test]
+    fn an_old_power_law_loads_and_evaluates_as_before() {
+        // A law as tables without intervals or a choice wrote it.
+        let c: CountLaw = serde_json::from_str(
+            r#"{ "law": "power", "n_ref": 41.0, "mor_ref_m": 100.0, "exponent": 1.5,
+                 "n_ref_std_error": 1.0, "exponent_std_error": 0.1 }"#,
+        )
+        .unwrap();
+        assert_eq!(c.family(), "power");
+        assert!((c.expected(25.0) - 41.0 * 4f64.powf(1.5)).abs() < 1e-9);
+    }
+
+    #[test]
+    fn the_onset_law_evaluates_its_formula_and_is_validated() {
+        let law = |steep: f64| CountLaw::Onset {
+            n_ref: 40.0,
+            mor_ref_m: 100.0,
+            exponent: 0.5,
+            onset_mor_m: 120.0,
+            onset_steepness: steep,
+            n_ref_ci95: None,
+            exponent_ci95: None,
+            onset_mor_ci95: None,
+            onset_steepness_ci95: None,
+        };
+        for mor in [10.0f64, 120.0, 1e4] {
+            let want = 40.0 * (100.0 / mor).powf(0.5) / (1.0 + (mor / 120.0f64).powf(4.0));
+            assert!((law(4.0).expected(mor) / want - 1.0).abs() < 1e-12, "{mor}");
+        }
+        // A steep onset far above its MOR does not overflow.
+        let far = law(50.0).expected(1e6);
+        assert!(far.is_finite() && far < 1e-100, "{far}");
+        let mut t = table();
+        let fog = t.weathers.get_mut(&WeatherClass::Fog).unwrap();
+        fog.ghost.as_mut().unwrap().count_law = Some(law(0.0));
+        let e = t.validate().unwrap_err().to_string();
+        assert!(e.contains("ghost.count_law.onset_steepness"), "{e}");
+        let fog = t.weathers.get_mut(&WeatherClass::Fog).unwrap();
+        fog.ghost.as_mut().unwrap().count_law = Some(law(4.0));
+        t.validate().unwrap();
     }
 
     #[test]

@@ -45,12 +45,31 @@ const FULL: &str = r#"{
         "reflectivity": { "mean": 4.0, "std": 11.0, "lower": 0.0 },
         "points_per_scan": 41.0, "points": 1000, "visible_fraction": 0.9,
         "count_law": { "law": "power", "n_ref": 40.0, "mor_ref_m": 100.0, "exponent": 1.0,
-                       "n_ref_std_error": 1.0, "exponent_std_error": 0.1 },
-        "count_law_reason": "r"
+                       "n_ref_std_error": 1.0, "exponent_std_error": 0.1,
+                       "n_ref_ci95": { "low": 38.0, "high": 42.0, "level": 0.95, "method": "m" },
+                       "exponent_ci95": { "low": 0.8, "high": 1.2, "level": 0.95, "method": "m" } },
+        "count_law_reason": "r",
+        "count_law_choice": { "chosen": "power", "folds": 5, "power_heldout_log_likelihood": -10.0,
+                              "onset_heldout_log_likelihood": -11.0, "onset_gain_p": 0.5,
+                              "reason": "r" }
       },
       "ghost_reason": "r",
-      "ring": null,
+      "ghost_returns": { "points": 1000, "distance_mean_m": 5.5, "distance_std_m": 1.5,
+                         "reflectivity_mean": 9.0, "reflectivity_std": 8.0 },
+      "ring": {
+        "distance_m": { "mean": 1.3, "std": 0.2, "lower": 0.0, "upper": 3.0, "reason": "r" },
+        "reflectivity": { "mean": 2.0, "std": 3.0, "lower": 0.0 },
+        "points_per_scan": 4.0, "points": 100,
+        "count_law": { "law": "onset", "n_ref": 10.0, "mor_ref_m": 100.0, "exponent": 0.5,
+                       "onset_mor_m": 80.0, "onset_steepness": 4.0,
+                       "n_ref_ci95": { "low": 8.0, "high": 12.0, "level": 0.95, "method": "m" },
+                       "exponent_ci95": { "low": 0.1, "high": 0.9, "level": 0.95, "method": "m" },
+                       "onset_mor_ci95": { "low": 70.0, "high": 90.0, "level": 0.95, "method": "m" },
+                       "onset_steepness_ci95": { "low": 2.0, "high": 8.0, "level": 0.95, "method": "m" } }
+      },
       "ring_reason": "r",
+      "ring_returns": { "points": 100, "distance_mean_m": 1.3, "distance_std_m": 0.2,
+                        "reflectivity_mean": 2.0, "reflectivity_std": 3.0 },
       "mor_from_rain_rate": { "slope": -0.8, "intercept": 159.0, "points": 42,
                               "slope_std_error": 0.1, "intercept_std_error": 1.0,
                               "rain_rate_min": 1.0, "rain_rate_max": 100.0,
@@ -126,6 +145,8 @@ fn every_table_field_is_documented_in_docs_formats_md() {
     // The full table really is full: the optional parts came through.
     for sure in [
         "count_law",
+        "onset_steepness_ci95",
+        "ghost_returns",
         "rain_rate_reliability",
         "extensions",
         "inputs",

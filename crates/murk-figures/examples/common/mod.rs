@@ -48,6 +48,7 @@ fn gaussian(mean: f64, std: f64, lower: Option<f64>, upper: Option<f64>) -> Gaus
         upper,
         mean_std_error: Some(std * 0.03),
         std_std_error: Some(std * 0.02),
+        reason: None,
     }
 }
 
@@ -61,6 +62,7 @@ fn noise(distance: Gaussian, reflectivity: Gaussian) -> NoiseLaw {
         visible_fraction: None,
         count_law: None,
         count_law_reason: None,
+        count_law_choice: None,
     }
 }
 
@@ -94,11 +96,13 @@ pub fn fog() -> WeatherCoefficients {
             gaussian(2.0, 3.0, Some(0.0), None),
         )),
         ghost_reason: None,
+        ghost_returns: None,
         ring: Some(noise(
             gaussian(1.2, 0.6, Some(0.0), Some(3.0)),
             gaussian(-985.0, 20.8, Some(0.0), None),
         )),
         ring_reason: None,
+        ring_returns: None,
         mor_from_rain_rate: None,
         mor_from_rain_rate_reason: None,
         reflectivity_sweep: [0.0, 5.0, 10.0, 20.0, 40.0]
