@@ -454,9 +454,13 @@ impl FittedTable {
             if let Some(l) = &c.law_choice {
                 let _ = writeln!(
                     s,
-                    "    vanishing law: {} (MOR exponent {:.3}; held-out gain of the bend {:.3} nats per recording, better in {} of {}, sign-flip p {:.4}){}",
+                    "    vanishing law: {} (MOR exponents {}; held-out gain of the bend {:.3} nats per recording, better in {} of {}, sign-flip p {:.4}){}",
                     l.chosen,
-                    l.exponent,
+                    l.exponents
+                        .iter()
+                        .map(|e| e.map_or("–".to_string(), |e| format!("{e:.3}")))
+                        .collect::<Vec<_>>()
+                        .join(", "),
                     l.gain_nats_per_recording,
                     l.recordings_better,
                     l.recordings,

@@ -5,7 +5,7 @@ use murk_types::{
     SlopeBand, SurvivalBin, SurvivalFit, SweepBand, Uncertainty, WeatherClass, WeatherCoefficients,
 };
 
-use crate::bend::{Binning, compare_laws, fit_power, half_survival, half_z, lack_of_fit};
+use crate::bend::{Binning, compare_laws, fit_powers, half_survival, half_z, lack_of_fit};
 
 use crate::FitValidParams;
 use crate::accumulate::{NoiseAcc, OCCLUDER_STEP_M, WeatherAcc};
@@ -380,7 +380,6 @@ fn bend_and_check(
     if bands.iter().all(|b| b.slope.is_none()) {
         return None;
     }
-    let n_b = bands.len();
     let bin = Binning {
         step: acc.survival.step(),
         anchor: acc.survival.anchor(),
@@ -396,45 +395,55 @@ fn bend_and_check(
     let alpha = p.edge_test_alpha();
     let folds = p.edge_test_folds();
     let all: Vec<&RecordingTrials> = recs.iter().collect();
-    let power = fit_power(&all, n_b, opts, bin);
-    let evidence = compare_laws(recs, n_b, opts, bin, folds as usize, seed("law-choice", ""));
-    let bent = matches!((&power, &evidence), (Some(_), Ok(e)) if e.gain > 0.0 && e.p <= alpha);
+    let fitted: Vec<bool> = bands.iter().map(|b| b.slope.is_some()).collect();
+    let powers = fit_powers(&all, &fitted, opts, bin);
+    let all_fitted = powers.iter().zip(&fitted).all(|(p, f)| !*f || p.is_some());
+    let evidence = compare_laws(
+        recs,
+        &fitted,
+        opts,
+        bin,
+        folds as usize,
+        seed("law-choice", ""),
+    );
+    let bent = all_fitted && matches!(&evidence, Ok(e) if e.gain > 0.0 && e.p <= alpha);
     let choice = LawChoice {
         chosen: if bent { "power" } else { "linear" }.into(),
-        exponent: power.as_ref().map_or(1.0, |f| f.exponent),
+        exponents: powers
+            .iter()
+            .map(|f| f.as_ref().map(|f| f.exponent))
+            .collect(),
         gain_nats_per_recording: evidence.as_ref().map_or(0.0, |e| e.gain),
         recordings_better: evidence.as_ref().map_or(0, |e| e.better as u32),
         recordings: evidence.as_ref().map_or(0, |e| e.recordings as u32),
         p_value: evidence.as_ref().map_or(1.0, |e| e.p),
         alpha,
         folds,
-        reason: match (&power, &evidence) {
-            (None, _) => Some("the power law could not be fitted".into()),
+        reason: match (all_fitted, &evidence) {
+            (false, _) => Some("the power law could not be fitted in every band".into()),
             (_, Err(e)) => Some(e.clone()),
             _ => None,
         },
     };
     let rs = cx.range_scale;
     let z_line = half_z(opts.edge, line.dropout, line.residual);
-    let z_power = power
-        .as_ref()
-        .and_then(|f| half_z(opts.edge, f.fit.dropout, f.fit.residual));
     let w = p.mor_bin_width_m();
     for (i, band) in bands.iter_mut().enumerate() {
         if band.slope.is_none() {
             continue;
         }
-        let power_band = power.as_ref().filter(|_| bent).and_then(|f| {
+        let power_band = powers[i].as_ref().filter(|_| bent).and_then(|f| {
             let a = *f.fit.bands[i].slope.as_ref().ok()?;
-            Some((a, f.exponent, f.fit.bands[i].width?))
+            let z = half_z(opts.edge, f.fit.dropout, f.fit.residual)?;
+            Some((a, f.exponent, f.fit.bands[i].width?, z))
         });
-        band.law = power_band.map(|(a, b, _)| murk_types::VanishingLaw::Power { a, b });
+        band.law = power_band.map(|(a, b, _, _)| murk_types::VanishingLaw::Power { a, b });
         let line_half = |mor: f64| {
             let (s, wd) = (band.slope?, band.edge_width?);
             Some(s * mor * rs * (1.0 + wd * z_line?))
         };
         let law_half = |mor: f64| match power_band {
-            Some((a, b, wd)) => Some(a * mor.powf(b) * rs * (1.0 + wd * z_power?)),
+            Some((a, b, wd, z)) => Some(a * mor.powf(b) * rs * (1.0 + wd * z)),
             None => line_half(mor),
         };
         let mut bins = Vec::new();

@@ -4,8 +4,8 @@
 //! `D = s·MOR·ρ`. Physics says otherwise in fog (the lidar equation gives a
 //! 50 %-survival range that grows sublinearly with MOR), so this module
 //!
-//! - fits the power law `D = a_b·MOR^c·ρ` (one exponent `c` for all bands,
-//!   a coefficient per band) by maximum likelihood: for a fixed `c`,
+//! - fits the power law `D = a·MOR^c·ρ` of each band (its own coefficient,
+//!   exponent, edge width, ε and π) by maximum likelihood: for a fixed `c`,
 //!   `r/(ρ·MOR^c) = u·MOR^(1−c)` with `u = r/(MOR·ρ)`, so every recording's
 //!   trials move along `ln u` by `(1 − c)·ln MOR` and the survival fit runs
 //!   unchanged on them; `c` is profiled (golden section);
@@ -89,19 +89,35 @@ pub struct Binning {
     pub anchor: f64,
 }
 
-/// Fits the power law on `recs` (profile likelihood over the exponent).
+/// Fits band `band` alone (its own edge width, ε and π) at exponent `c`;
+/// `None` when it has no slope there.
+pub fn fit_band_at(
+    recs: &[&RecordingTrials],
+    n_bands: usize,
+    band: usize,
+    c: f64,
+    opts: &SurvivalOptions,
+    bin: Binning,
+) -> Option<SurvivalResult> {
+    let mut obs = shifted_observations(recs, n_bands, c, bin.step, bin.anchor);
+    for (j, o) in obs.iter_mut().enumerate() {
+        if j != band {
+            o.clear();
+        }
+    }
+    fit_survival(&obs, opts).filter(|r| r.bands[band].slope.is_ok())
+}
+
+/// Fits the power law of band `band` on `recs` (profile likelihood over
+/// its exponent; the band's own edge width, ε and π).
 pub fn fit_power(
     recs: &[&RecordingTrials],
     n_bands: usize,
+    band: usize,
     opts: &SurvivalOptions,
     bin: Binning,
 ) -> Option<PowerFit> {
-    let eval = |c: f64| -> Option<SurvivalResult> {
-        fit_survival(
-            &shifted_observations(recs, n_bands, c, bin.step, bin.anchor),
-            opts,
-        )
-    };
+    let eval = |c: f64| fit_band_at(recs, n_bands, band, c, opts, bin);
     let cost = |c: f64| eval(c).map_or(f64::INFINITY, |r| r.nll);
     let g = (5f64.sqrt() - 1.0) / 2.0;
     let (mut a, mut b) = EXPONENT_RANGE;
@@ -128,6 +144,22 @@ pub fn fit_power(
     fit.nll.is_finite().then_some(PowerFit { exponent: c, fit })
 }
 
+/// The power law of every band whose line has a slope (`fitted[i]`).
+pub fn fit_powers(
+    recs: &[&RecordingTrials],
+    fitted: &[bool],
+    opts: &SurvivalOptions,
+    bin: Binning,
+) -> Vec<Option<PowerFit>> {
+    (0..fitted.len())
+        .map(|i| {
+            fitted[i]
+                .then(|| fit_power(recs, fitted.len(), i, opts, bin))
+                .flatten()
+        })
+        .collect()
+}
+
 /// The held-out comparison of the power law with the line (see the module
 /// docs).
 #[derive(Debug, Clone, PartialEq)]
@@ -144,15 +176,18 @@ pub struct LawEvidence {
 
 /// Compares the power law with the line on held-out recordings: `folds`
 /// folds interleaved in MOR order, each predicted by both laws fitted
-/// without it.
+/// without it, band by band with the same freedom (each band its own edge
+/// width, ε and π), so the gain is the exponent's alone. `fitted[b]` says
+/// which bands take part.
 pub fn compare_laws(
     recs: &[RecordingTrials],
-    n_bands: usize,
+    fitted: &[bool],
     opts: &SurvivalOptions,
     bin: Binning,
     folds: usize,
     seed: [u8; 32],
 ) -> Result<LawEvidence, String> {
+    let n_bands = fitted.len();
     let g_n = recs.len();
     if g_n < folds.max(3) {
         return Err(format!(
@@ -172,19 +207,30 @@ pub fn compare_laws(
             .filter(|&g| fold_of[g] != f)
             .map(|g| &recs[g])
             .collect();
-        let line = fit_survival(
-            &shifted_observations(&train, n_bands, 1.0, bin.step, bin.anchor),
-            opts,
-        )
-        .ok_or("the line could not be fitted with a fold of recordings left out")?;
-        let power = fit_power(&train, n_bands, opts, bin)
-            .ok_or("the power law could not be fitted with a fold of recordings left out")?;
+        // The line with the same per-band freedom (edge width, ε, π) as the
+        // power law, so the comparison weighs the exponent alone.
+        let lines: Vec<Option<SurvivalResult>> = (0..n_bands)
+            .map(|b| {
+                fitted[b]
+                    .then(|| fit_band_at(&train, n_bands, b, 1.0, opts, bin))
+                    .flatten()
+            })
+            .collect();
+        let powers = fit_powers(&train, fitted, opts, bin);
+        if powers.iter().zip(fitted).any(|(p, f)| *f && p.is_none()) {
+            return Err(
+                "the power law could not be fitted with a fold of recordings left out".into(),
+            );
+        }
         for g in (0..g_n).filter(|&g| fold_of[g] == f) {
             let r = &recs[g];
-            let shift = (1.0 - power.exponent) * r.mor.ln();
             let mut d = 0.0;
             let mut any = false;
-            for b in 0..n_bands {
+            for (b, power) in powers.iter().enumerate() {
+                let (Some(power), Some(line)) = (power, &lines[b]) else {
+                    continue;
+                };
+                let shift = (1.0 - power.exponent) * r.mor.ln();
                 for o in &r.bands[b] {
                     let (Some(pl), Some(pp)) = (
                         line.keep_probability(opts, b, o.u),

@@ -325,9 +325,10 @@ pub struct LackOfFit {
 /// recordings.
 ///
 /// Recordings are split into `folds` folds; each fold is predicted by the
-/// line and by the law that bends (`a_band·MOR^b`, one exponent for all
-/// bands, fitted by maximum likelihood with the edge), both fitted without
-/// it. Each recording's gain is the difference of its held-out
+/// line and by the law that bends (`a·MOR^b` per band, each band with its
+/// own exponent, edge width, dropout and residual survival, fitted by
+/// maximum likelihood; the line is fitted per band with the same freedom,
+/// so the comparison weighs the exponent alone), both fitted without it. Each recording's gain is the difference of its held-out
 /// log-likelihoods (bent − line); the law that bends is chosen when their
 /// mean is positive and the one-sided sign-flip p-value is `≤ alpha`, so
 /// the line stays when it is enough.
@@ -335,8 +336,9 @@ pub struct LackOfFit {
 pub struct LawChoice {
     /// `linear` or `power`.
     pub chosen: String,
-    /// The exponent `b` fitted on all recordings.
-    pub exponent: f64,
+    /// Per band of `vanishing_slope`, the exponent `b` of its power law
+    /// fitted on all recordings (null for a band without a slope).
+    pub exponents: Vec<Option<f64>>,
     /// Mean held-out gain of the bent law over the line, nats per
     /// recording.
     pub gain_nats_per_recording: f64,

@@ -75,7 +75,7 @@ const FULL: &str = r#"{
           "function": { "kind": "categories", "values": { "wet": 1.2 } },
           "default": 1.0, "description": "d" }
       ],
-      "law_choice": { "chosen": "power", "exponent": 0.75, "gain_nats_per_recording": 2.0,
+      "law_choice": { "chosen": "power", "exponents": [0.75, null], "gain_nats_per_recording": 2.0,
                       "recordings_better": 30, "recordings": 36, "p_value": 0.001,
                       "alpha": 0.01, "folds": 5, "reason": "r" }
     }
