@@ -1056,7 +1056,6 @@ mod tests {
             reflectivity_sweep: vec![],
             extensions: vec![],
             law_choice: None,
-            law_choice: None,
         };
         CoefficientTable {
             format: TABLE_FORMAT.into(),
