@@ -367,6 +367,41 @@ impl FittedTable {
                 if let Some(r) = &ml.reason {
                     let _ = writeln!(s, "      ML: {r}");
                 }
+                if let Some(l) = &ml.law {
+                    let _ = writeln!(s, "      applied law: {}", l.describe());
+                }
+                if let Some(f) = &ml.lack_of_fit {
+                    let _ = writeln!(
+                        s,
+                        "      lack of fit of the line against {} per-MOR-bin 50 % ranges: {} (χ² {:.1} on {} dof, p {:.3}; worst bin at {:.2}× the line)",
+                        f.bins,
+                        if f.lack_of_fit { "yes" } else { "no" },
+                        f.statistic,
+                        f.dof,
+                        f.p_value,
+                        f.worst_ratio
+                    );
+                }
+            }
+            if let Some(l) = &c.law_choice {
+                let _ = writeln!(
+                    s,
+                    "    vanishing law: {} (MOR exponents {}; held-out gain of the bend {:.3} nats per recording, better in {} of {}, sign-flip p {:.4}){}",
+                    l.chosen,
+                    l.exponents
+                        .iter()
+                        .map(|e| e.map_or("–".to_string(), |e| format!("{e:.3}")))
+                        .collect::<Vec<_>>()
+                        .join(", "),
+                    l.gain_nats_per_recording,
+                    l.recordings_better,
+                    l.recordings,
+                    l.p_value,
+                    l.reason
+                        .as_deref()
+                        .map(|r| format!(": {r}"))
+                        .unwrap_or_default()
+                );
             }
             if let Some(r) = &c.mor_from_rain_rate {
                 let _ = writeln!(

@@ -1,10 +1,12 @@
 //! From accumulated statistics to the coefficient table (no I/O).
 
 use murk_types::{
-    CountLaw, CountLawChoice, EdgeTest, Gaussian, Interval, MorBin, NoiseLaw, RainConversion,
-    ReturnMoments, SlopeBand, SurvivalFit, SweepBand, Uncertainty, WeatherClass,
-    WeatherCoefficients,
+    CountLaw, CountLawChoice, EdgeTest, Gaussian, Interval, LackOfFit, LawChoice, MorBin,
+    NoiseLaw, RainConversion, ReturnMoments, SlopeBand, SurvivalBin, SurvivalFit, SweepBand,
+    Uncertainty, WeatherClass, WeatherCoefficients,
 };
+
+use crate::bend::{Binning, compare_laws, fit_powers, half_survival, half_z, lack_of_fit};
 
 use crate::FitValidParams;
 use crate::accumulate::{NoiseAcc, OCCLUDER_STEP_M, WeatherAcc};
@@ -473,6 +475,142 @@ fn band_obs(acc: &WeatherAcc, partition: &Partition, band: &Band) -> Vec<crate::
     acc.survival.observations(partition.classes_in(band))
 }
 
+/// The law that bends ([`crate::bend`]): fits `a·MOR^c` beside the line,
+/// chooses on held-out recordings, writes the chosen law into the bands,
+/// and fills each band's per-MOR-bin 50 % ranges and the line's lack of
+/// fit. Returns the choice (`None` when no band has a slope).
+fn bend_and_check(
+    bands: &mut [SlopeBand],
+    line: &SurvivalResult,
+    recs: &[RecordingTrials],
+    means: &[(i64, f64)],
+    opts: &SurvivalOptions,
+    cx: &WeatherContext<'_>,
+    acc: &WeatherAcc,
+) -> Option<LawChoice> {
+    let p = cx.params;
+    if bands.iter().all(|b| b.slope.is_none()) {
+        return None;
+    }
+    let bin = Binning {
+        step: acc.survival.step(),
+        anchor: acc.survival.anchor(),
+    };
+    let seed = |what: &str, extra: &str| {
+        murk_types::seed::derive(
+            p.seed(),
+            &murk_types::seed::key(&[what, cx.class.name(), extra]),
+            murk_types::seed::Purpose::Bootstrap,
+        )
+        .bytes()
+    };
+    let alpha = p.edge_test_alpha();
+    let folds = p.edge_test_folds();
+    let all: Vec<&RecordingTrials> = recs.iter().collect();
+    let fitted: Vec<bool> = bands.iter().map(|b| b.slope.is_some()).collect();
+    let powers = fit_powers(&all, &fitted, opts, bin);
+    let all_fitted = powers.iter().zip(&fitted).all(|(p, f)| !*f || p.is_some());
+    let evidence = compare_laws(
+        recs,
+        &fitted,
+        opts,
+        bin,
+        folds as usize,
+        seed("law-choice", ""),
+    );
+    let bent = all_fitted && matches!(&evidence, Ok(e) if e.gain > 0.0 && e.p <= alpha);
+    let choice = LawChoice {
+        chosen: if bent { "power" } else { "linear" }.into(),
+        exponents: powers
+            .iter()
+            .map(|f| f.as_ref().map(|f| f.exponent))
+            .collect(),
+        gain_nats_per_recording: evidence.as_ref().map_or(0.0, |e| e.gain),
+        recordings_better: evidence.as_ref().map_or(0, |e| e.better as u32),
+        recordings: evidence.as_ref().map_or(0, |e| e.recordings as u32),
+        p_value: evidence.as_ref().map_or(1.0, |e| e.p),
+        alpha,
+        folds,
+        reason: match (all_fitted, &evidence) {
+            (false, _) => Some("the power law could not be fitted in every band".into()),
+            (_, Err(e)) => Some(e.clone()),
+            _ => None,
+        },
+    };
+    let rs = cx.range_scale;
+    let z_line = half_z(opts.edge, line.dropout, line.residual);
+    let w = p.mor_bin_width_m();
+    for (i, band) in bands.iter_mut().enumerate() {
+        if band.slope.is_none() {
+            continue;
+        }
+        let power_band = powers[i].as_ref().filter(|_| bent).and_then(|f| {
+            let a = *f.fit.bands[i].slope.as_ref().ok()?;
+            let z = half_z(opts.edge, f.fit.dropout, f.fit.residual)?;
+            Some((a, f.exponent, f.fit.bands[i].width?, z))
+        });
+        band.law = power_band.map(|(a, b, _, _)| murk_types::VanishingLaw::Power { a, b });
+        let line_half = |mor: f64| {
+            let (s, wd) = (band.slope?, band.edge_width?);
+            Some(s * mor * rs * (1.0 + wd * z_line?))
+        };
+        let law_half = |mor: f64| match power_band {
+            Some((a, b, wd, z)) => Some(a * mor.powf(b) * rs * (1.0 + wd * z)),
+            None => line_half(mor),
+        };
+        let mut bins = Vec::new();
+        let mut tested = Vec::new();
+        for &(k, mean) in means {
+            let in_bin: Vec<&RecordingTrials> = recs
+                .iter()
+                .filter(|r| (r.mor / w).floor() as i64 == k)
+                .collect();
+            let h = half_survival(
+                &in_bin,
+                i,
+                p.bootstrap_replicates(),
+                seed("half-survival", &format!("{i}/{k}")),
+            );
+            if h.trials == 0 {
+                continue;
+            }
+            let (lm, am) = (line_half(mean), law_half(mean));
+            if let (Ok(r), Ok(ci), Some(l)) = (&h.range, &h.ci95, lm) {
+                tested.push((*r, *ci, l));
+            }
+            bins.push(SurvivalBin {
+                mor_m: mean,
+                mor_lo_m: k as f64 * w,
+                mor_hi_m: (k + 1) as f64 * w,
+                recordings: h.recordings as u32,
+                trials: h.trials,
+                half_survival_range_m: h.range.as_ref().ok().copied(),
+                ci95: h.ci95.as_ref().ok().map(|&[low, high]| Interval {
+                    low,
+                    high,
+                    level: 0.95,
+                    method: "bootstrap over recordings".into(),
+                }),
+                line_m: lm,
+                law_m: am,
+                reason: h.range.err().or(h.ci95.err()),
+            });
+        }
+        band.survival_bins = bins;
+        band.lack_of_fit =
+            lack_of_fit(&tested).map(|(statistic, dof, p_value, worst_ratio)| LackOfFit {
+                statistic,
+                dof,
+                bins: tested.len() as u32,
+                p_value,
+                alpha,
+                lack_of_fit: p_value <= alpha,
+                worst_ratio,
+            });
+    }
+    Some(choice)
+}
+
 /// Fits every coefficient of one weather.
 pub fn weather(
     acc: &WeatherAcc,
@@ -667,6 +805,9 @@ pub fn weather(
                         edge_width: m.bands[i].width,
                         edge_width_ci95: robust.widths.get(i).copied().flatten().map(&interval),
                         mor_bins: vec![],
+                        law: None,
+                        survival_bins: vec![],
+                        lack_of_fit: None,
                     }
                 }
                 None => SlopeBand {
@@ -688,6 +829,9 @@ pub fn weather(
                     edge_width: None,
                     edge_width_ci95: None,
                     mor_bins: vec![],
+                    law: None,
+                    survival_bins: vec![],
+                    lack_of_fit: None,
                 },
             }
         })
@@ -695,6 +839,21 @@ pub fn weather(
 
     // The seed's quantile estimator, per band and over all reflectivities.
     let means = bin_means(acc, p.mor_bin_width_m());
+
+    // A law that bends, chosen against the line on held-out recordings,
+    // and the per-MOR-bin 50 % ranges with the line's lack of fit.
+    let mut vanishing_slope = vanishing_slope;
+    let law_choice = ml.as_ref().and_then(|m| {
+        bend_and_check(
+            &mut vanishing_slope,
+            m,
+            &per_recording,
+            &means,
+            &opts,
+            cx,
+            acc,
+        )
+    });
     let vanishing_slope_q99: Vec<SlopeBand> = bands
         .iter()
         .enumerate()
@@ -715,6 +874,9 @@ pub fn weather(
                 edge_width: None,
                 edge_width_ci95: None,
                 mor_bins: qs.iter().map(to_mor_bin).collect(),
+                law: None,
+                survival_bins: vec![],
+                lack_of_fit: None,
             }
         })
         .collect();
@@ -837,6 +999,7 @@ pub fn weather(
         mor_from_rain_rate_reason,
         reflectivity_sweep,
         extensions: Vec::new(),
+        law_choice,
     };
     let diagnostics = WeatherDiagnostics {
         mor: mors,

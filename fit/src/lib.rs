@@ -88,6 +88,7 @@ mod accumulate;
 #[allow(clippy::disallowed_methods, clippy::disallowed_types)]
 mod algorithm;
 mod assemble;
+mod bend;
 pub mod diagnostics;
 #[allow(clippy::disallowed_methods, clippy::disallowed_types)]
 mod driver;

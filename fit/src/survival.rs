@@ -147,6 +147,16 @@ impl SurvivalHistogram {
         out
     }
 
+    /// Bin width in `ln u`.
+    pub fn step(&self) -> f64 {
+        self.step
+    }
+
+    /// `ln u` of the first bin's lower edge.
+    pub fn anchor(&self) -> f64 {
+        self.ln_u0
+    }
+
     /// Number of classes.
     pub fn classes(&self) -> usize {
         self.classes

@@ -242,7 +242,7 @@ impl ApplyParams {
             && (mor < lo || mor > hi)
         {
             warnings.push(format!(
-                "MOR {} m is outside the {}–{} m of the {w} recordings the table was fitted on: the linear vanishing model extrapolates",
+                "MOR {} m is outside the {}–{} m of the {w} recordings the table was fitted on: the vanishing law extrapolates",
                 short_number(mor, Toward::Nearest),
                 short_number(lo, Toward::Nearest),
                 short_number(hi, Toward::Nearest)
@@ -455,8 +455,14 @@ impl ApplyParams {
                 ));
             }
             let b_edge_width = borrowed.map_or(b.edge_width, |(_, f)| f.edge_width);
-            let slope = match borrowed.and_then(|(_, f)| f.slope).or(b.slope) {
-                Some(s) => s,
+            // The band's vanishing law (murk-types owns it): a law that
+            // bends applies as the slope of the line that gives its
+            // distance at this MOR.
+            let law = borrowed
+                .and_then(|(_, f)| f.vanishing_law())
+                .or(b.vanishing_law());
+            let slope = match law {
+                Some(l) => l.effective_slope(mor),
                 None if identity => f64::NAN,
                 None => {
                     return Err(missing(

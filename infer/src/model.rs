@@ -43,8 +43,10 @@ pub struct BandRule {
     pub reflectivity_min: f64,
     /// Upper edge (exclusive); `None` when unbounded.
     pub reflectivity_max: Option<f64>,
-    /// Vanishing slope of the band (NaN only for an identity model built on
-    /// a band without slope).
+    /// Vanishing slope of the band at the applied MOR (NaN only for an
+    /// identity model built on a band without slope): the table's slope for
+    /// the linear law, `a·MOR^(b−1)` for a law that bends
+    /// ([`murk_types::VanishingLaw::effective_slope`]).
     pub slope: f64,
     /// `slope × MOR × range_scale`, metres (infinite for the identity).
     pub vanishing_distance_m: f64,

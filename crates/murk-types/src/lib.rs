@@ -17,6 +17,8 @@
 //! - [`WeatherClass`]: clear, fog, rain, snow.
 //! - [`EdgeShape`]: the soft survival edge law (probit or unit-variance
 //!   logistic), fitted by `fit`, applied by `infer`.
+//! - [`VanishingLaw`]: the vanishing-distance law (the seed's line or a
+//!   power of MOR that bends), fitted by `fit`, applied by `infer`.
 //! - [`seed`]: the one seed derivation, `(seed, item key, purpose)`, of
 //!   every randomised step.
 //! - [`CoefficientTable`]: the fitted weather-noise coefficients
@@ -51,6 +53,7 @@ mod lidar;
 pub mod real_data;
 pub mod seed;
 mod table;
+mod vanishing;
 mod walk;
 mod weather;
 
@@ -71,9 +74,11 @@ pub use intensity::IntensityScale;
 pub use lidar::LidarSpec;
 pub use table::{
     ClearCoefficients, CoefficientTable, CountLaw, CountLawChoice, CountUnit, EdgeTest,
-    ExcludedRecording, Gaussian, InputDigest, Interval, MorBin, NoiseLaw, Provenance,
-    RadarCoefficients, RainConversion, ReturnMoments, RingGeometry, SensorGeometry, SlopeBand,
+    ExcludedRecording, Gaussian, InputDigest, Interval, LackOfFit, LawChoice, MorBin, NoiseLaw,
+    Provenance, RadarCoefficients, RainConversion, ReturnMoments, RingGeometry, SensorGeometry,
+    SlopeBand, SurvivalBin,
     SurvivalFit, SweepBand, TABLE_FORMAT, TableLidar, Uncertainty, WeatherCoefficients,
 };
+pub use vanishing::VanishingLaw;
 pub use walk::{LeftOut, Walk, WalkedFile, walk_folder};
 pub use weather::WeatherClass;

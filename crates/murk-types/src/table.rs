@@ -200,6 +200,10 @@ pub struct WeatherCoefficients {
     /// plain fit); see [`crate::ModelExtension`].
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub extensions: Vec<crate::ModelExtension>,
+    /// Which vanishing law the bands use (survival fit only; absent in
+    /// tables before it, which use the line).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub law_choice: Option<LawChoice>,
 }
 
 /// One reflectivity band of a slope list.
@@ -243,6 +247,122 @@ pub struct SlopeBand {
     /// Per-MOR-bin quantiles of this band (quantile estimate only).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub mor_bins: Vec<MorBin>,
+    /// The vanishing law appliers use when it is not the linear law of
+    /// `slope` (survival fit only): a law that bends, `a·MOR^b`, chosen over
+    /// the line on held-out recordings (see
+    /// [`WeatherCoefficients::law_choice`]). Absent: the line `slope·MOR`.
+    /// `slope` stays the linear fit either way, so published tables can be
+    /// re-derived. Use [`SlopeBand::vanishing_law`].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub law: Option<crate::VanishingLaw>,
+    /// Per MOR bin, the nonparametric 50 %-survival range of the band with
+    /// its interval over recordings, beside the fitted laws' (survival fit
+    /// only).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub survival_bins: Vec<SurvivalBin>,
+    /// The test of the fitted line against `survival_bins` (survival fit
+    /// only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lack_of_fit: Option<LackOfFit>,
+}
+
+/// The nonparametric 50 %-survival range of one band in one MOR bin.
+///
+/// The bin's clear returns of the band, from every recording in the bin,
+/// are pooled by range; the kept share is made non-increasing in range
+/// (pool-adjacent-violators, weighted by trials), and the range where it
+/// falls through 50 % is read off by linear interpolation. The interval
+/// resamples the bin's recordings (bootstrap over recordings, percentile).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SurvivalBin {
+    /// Mean MOR of the bin's recordings, metres.
+    pub mor_m: f64,
+    /// Lower edge of the bin, metres.
+    pub mor_lo_m: f64,
+    /// Upper edge of the bin, metres.
+    pub mor_hi_m: f64,
+    /// Recordings in the bin with returns in the band.
+    pub recordings: u32,
+    /// Clear returns (trials) of the band in the bin.
+    pub trials: u64,
+    /// The range where half the band's clear returns survive, metres; null
+    /// with `reason` when survival does not cross 50 % inside the scene.
+    pub half_survival_range_m: Option<f64>,
+    /// 95 % interval of `half_survival_range_m` over recordings.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ci95: Option<Interval>,
+    /// The fitted line's 50 %-survival range at `mor_m` (its edge, dropout
+    /// and residual survival included), metres.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub line_m: Option<f64>,
+    /// The applied law's (`law`, or the line) 50 %-survival range at
+    /// `mor_m`, metres.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub law_m: Option<f64>,
+    /// Why `half_survival_range_m` or its interval is null.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
+}
+
+/// Does the fitted line describe the per-bin 50 %-survival ranges?
+///
+/// `statistic = Σ ((ln r̂_k − ln ℓ_k) / se_k)²` over the bins with a range
+/// and an interval, `r̂_k` the nonparametric range, `ℓ_k` the line's, `se_k`
+/// the bootstrap standard error of `ln r̂_k` (from its 95 % interval); under
+/// the line it is χ² with `dof = bins − 1`. `lack_of_fit` is true when
+/// `p_value ≤ alpha`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LackOfFit {
+    /// The χ² statistic.
+    pub statistic: f64,
+    /// Degrees of freedom.
+    pub dof: u32,
+    /// Bins that entered.
+    pub bins: u32,
+    /// Upper-tail χ² p-value.
+    pub p_value: f64,
+    /// Level of the test.
+    pub alpha: f64,
+    /// True when the line does not fit the bins.
+    pub lack_of_fit: bool,
+    /// The bin whose range departs most from the line, as `range / line`.
+    pub worst_ratio: f64,
+}
+
+/// Which vanishing law a weather's bands use, chosen on held-out
+/// recordings.
+///
+/// Recordings are split into `folds` folds; each fold is predicted by the
+/// line and by the law that bends (`a·MOR^b` per band, each band with its
+/// own exponent, edge width, dropout and residual survival, fitted by
+/// maximum likelihood; the line is fitted per band with the same freedom,
+/// so the comparison weighs the exponent alone), both fitted without it. Each recording's gain is the difference of its held-out
+/// log-likelihoods (bent − line); the law that bends is chosen when their
+/// mean is positive and the one-sided sign-flip p-value is `≤ alpha`, so
+/// the line stays when it is enough.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LawChoice {
+    /// `linear` or `power`.
+    pub chosen: String,
+    /// Per band of `vanishing_slope`, the exponent `b` of its power law
+    /// fitted on all recordings (null for a band without a slope).
+    pub exponents: Vec<Option<f64>>,
+    /// Mean held-out gain of the bent law over the line, nats per
+    /// recording.
+    pub gain_nats_per_recording: f64,
+    /// Recordings the bent law predicted better.
+    pub recordings_better: u32,
+    /// Recordings compared.
+    pub recordings: u32,
+    /// One-sided sign-flip p-value of the mean gain.
+    pub p_value: f64,
+    /// Level.
+    pub alpha: f64,
+    /// Folds over recordings.
+    pub folds: u32,
+    /// Why the comparison could not be made, if it could not.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
 }
 
 /// A confidence interval and how it was made.
@@ -743,6 +863,14 @@ impl WeatherCoefficients {
 }
 
 impl SlopeBand {
+    /// The vanishing law of the band: `law` when the table gives one, else
+    /// the line of `slope`; `None` without either.
+    pub fn vanishing_law(&self) -> Option<crate::VanishingLaw> {
+        self.law.or(self
+            .slope
+            .map(|slope| crate::VanishingLaw::Linear { slope }))
+    }
+
     /// True when `reflectivity` lies in `[reflectivity_min, reflectivity_max)`.
     pub fn contains(&self, reflectivity: f64) -> bool {
         reflectivity >= self.reflectivity_min
@@ -819,6 +947,16 @@ impl CoefficientTable {
             });
             v.bands(&c.vanishing_slope, &format!("{at}.vanishing_slope"));
             v.bands(&c.vanishing_slope_q99, &format!("{at}.vanishing_slope_q99"));
+            for (i, b) in c.vanishing_slope.iter().enumerate() {
+                if let Some(l) = &b.law {
+                    let res = l.check();
+                    v.check(
+                        res.is_ok(),
+                        &format!("{at}.vanishing_slope[{i}].law"),
+                        || res.unwrap_err(),
+                    );
+                }
+            }
             v.check(
                 c.quantile > 0.0 && c.quantile < 1.0,
                 &format!("{at}.quantile"),
@@ -998,6 +1136,9 @@ mod tests {
             edge_width: None,
             edge_width_ci95: None,
             mor_bins: vec![],
+            law: None,
+            survival_bins: vec![],
+            lack_of_fit: None,
         }
     }
 
@@ -1072,6 +1213,7 @@ mod tests {
             mor_from_rain_rate_reason: None,
             reflectivity_sweep: vec![],
             extensions: vec![],
+            law_choice: None,
         };
         CoefficientTable {
             format: TABLE_FORMAT.into(),

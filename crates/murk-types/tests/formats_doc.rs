@@ -25,7 +25,15 @@ const FULL: &str = r#"{
           "reason": "r", "std_error": 0.01, "edge_width": 0.1,
           "mor_bins": [ { "mor_m": 55.0, "mor_lo_m": 50.0, "mor_hi_m": 60.0, "recordings": 2,
                           "q99_range_m": 16.0, "points": 5, "censored": false, "used": true,
-                          "reason": "r" } ] },
+                          "reason": "r" } ],
+          "law": { "kind": "power", "a": 1.2, "b": 0.75 },
+          "survival_bins": [ { "mor_m": 55.0, "mor_lo_m": 50.0, "mor_hi_m": 60.0, "recordings": 2,
+                               "trials": 100, "half_survival_range_m": 30.0,
+                               "ci95": { "low": 28.0, "high": 32.0, "level": 0.95,
+                                         "method": "bootstrap over recordings" },
+                               "line_m": 31.0, "law_m": 30.5, "reason": "r" } ],
+          "lack_of_fit": { "statistic": 3.0, "dof": 2, "bins": 3, "p_value": 0.22,
+                           "alpha": 0.05, "lack_of_fit": false, "worst_ratio": 0.9 } },
         { "reflectivity_min": 10.0, "reflectivity_max": null, "slope": 0.35, "points": 10 }
       ],
       "vanishing_slope_q99": [
@@ -85,7 +93,10 @@ const FULL: &str = r#"{
         { "observable": "count", "covariate": "Road state",
           "function": { "kind": "categories", "values": { "wet": 1.2 } },
           "default": 1.0, "description": "d" }
-      ]
+      ],
+      "law_choice": { "chosen": "power", "exponents": [0.75, null], "gain_nats_per_recording": 2.0,
+                      "recordings_better": 30, "recordings": 36, "p_value": 0.001,
+                      "alpha": 0.01, "folds": 5, "reason": "r" }
     }
   },
   "absent": { "snow": "no recording" },
@@ -151,6 +162,9 @@ fn every_table_field_is_documented_in_docs_formats_md() {
         "extensions",
         "inputs",
         "edge_width",
+        "law_choice",
+        "survival_bins",
+        "lack_of_fit",
     ] {
         assert!(names.contains(sure), "{sure} missing from {names:?}");
     }

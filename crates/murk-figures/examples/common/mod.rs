@@ -37,6 +37,9 @@ fn band(min: f64, max: Option<f64>, slope: Option<f64>, bins: Vec<MorBin>) -> Sl
         edge_width: None,
         edge_width_ci95: None,
         mor_bins: bins,
+        law: None,
+        survival_bins: vec![],
+        lack_of_fit: None,
     }
 }
 
@@ -117,6 +120,7 @@ pub fn fog() -> WeatherCoefficients {
             })
             .collect(),
         extensions: vec![],
+        law_choice: None,
     }
 }
 

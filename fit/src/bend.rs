@@ -1,0 +1,554 @@
+//! A vanishing law that can bend, and the evidence for or against the line.
+//!
+//! The survival fit ([`crate::survival`]) places each band's edge at
+//! `D = s·MOR·ρ`. Physics says otherwise in fog (the lidar equation gives a
+//! 50 %-survival range that grows sublinearly with MOR), so this module
+//!
+//! - fits the power law `D = a·MOR^c·ρ` of each band (its own coefficient,
+//!   exponent, edge width, ε and π) by maximum likelihood: for a fixed `c`,
+//!   `r/(ρ·MOR^c) = u·MOR^(1−c)` with `u = r/(MOR·ρ)`, so every recording's
+//!   trials move along `ln u` by `(1 − c)·ln MOR` and the survival fit runs
+//!   unchanged on them; `c` is profiled (golden section);
+//! - chooses between the line and the power law on held-out recordings
+//!   (folds over recordings, per-recording log-likelihood gains, one-sided
+//!   sign-flip test), so the line stays unless the bend predicts recordings
+//!   it has not seen significantly better;
+//! - measures, per MOR bin and band, the nonparametric 50 %-survival range
+//!   (isotonic survival curve in range, pooled over the bin's recordings)
+//!   with a bootstrap-over-recordings interval, and tests the fitted line
+//!   against those ranges (χ² lack of fit on the log scale).
+//!
+//! No I/O; every random step is seeded by `murk_types::seed`.
+
+use rand::{RngExt, SeedableRng, rngs::ChaCha8Rng};
+
+use crate::hyperparams::EdgeShape;
+use crate::survival::{
+    Obs, RecordingTrials, SurvivalOptions, SurvivalResult, fit_survival, sign_flip_p,
+};
+
+/// Range of the exponent searched, and the precision of its profile.
+const EXPONENT_RANGE: (f64, f64) = (0.2, 1.8);
+const EXPONENT_TOL: f64 = 0.002;
+
+/// Width of the range bins pooled for the nonparametric curve, in `ln r`.
+pub const RANGE_STEP: f64 = 0.02;
+
+/// The trials of `recs` per band with `u` moved to `u·MOR^(1−c)`, binned
+/// at `step` in `ln u` (bins anchored as the survival histogram's, so
+/// `c = 1` gives its observations back).
+pub fn shifted_observations(
+    recs: &[&RecordingTrials],
+    n_bands: usize,
+    c: f64,
+    step: f64,
+    anchor: f64,
+) -> Vec<Vec<Obs>> {
+    let mut out = Vec::with_capacity(n_bands);
+    for b in 0..n_bands {
+        let mut m: std::collections::BTreeMap<i64, (f64, f64)> = Default::default();
+        for r in recs {
+            let shift = (1.0 - c) * r.mor.ln();
+            for o in &r.bands[b] {
+                let k = ((o.u.ln() + shift - anchor) / step).floor() as i64;
+                let e = m.entry(k).or_default();
+                e.0 += o.kept;
+                e.1 += o.total;
+            }
+        }
+        out.push(
+            m.into_iter()
+                .filter(|(_, (_, n))| *n > 0.0)
+                .map(|(k, (kept, total))| Obs {
+                    u: (anchor + (k as f64 + 0.5) * step).exp(),
+                    kept,
+                    total,
+                })
+                .collect(),
+        );
+    }
+    out
+}
+
+/// A power-law fit: the exponent and the survival fit at it (whose band
+/// slopes are the coefficients `a`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct PowerFit {
+    /// The exponent `c` of MOR.
+    pub exponent: f64,
+    /// The survival fit on the shifted trials.
+    pub fit: SurvivalResult,
+}
+
+/// Binning of the shifted trials: the survival histogram's step and anchor.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Binning {
+    /// Bin width in `ln u`.
+    pub step: f64,
+    /// `ln u` of the first bin's lower edge.
+    pub anchor: f64,
+}
+
+/// Fits band `band` alone (its own edge width, ε and π) at exponent `c`;
+/// `None` when it has no slope there.
+pub fn fit_band_at(
+    recs: &[&RecordingTrials],
+    n_bands: usize,
+    band: usize,
+    c: f64,
+    opts: &SurvivalOptions,
+    bin: Binning,
+) -> Option<SurvivalResult> {
+    let mut obs = shifted_observations(recs, n_bands, c, bin.step, bin.anchor);
+    for (j, o) in obs.iter_mut().enumerate() {
+        if j != band {
+            o.clear();
+        }
+    }
+    fit_survival(&obs, opts).filter(|r| r.bands[band].slope.is_ok())
+}
+
+/// Fits the power law of band `band` on `recs` (profile likelihood over
+/// its exponent; the band's own edge width, ε and π).
+pub fn fit_power(
+    recs: &[&RecordingTrials],
+    n_bands: usize,
+    band: usize,
+    opts: &SurvivalOptions,
+    bin: Binning,
+) -> Option<PowerFit> {
+    let eval = |c: f64| fit_band_at(recs, n_bands, band, c, opts, bin);
+    let cost = |c: f64| eval(c).map_or(f64::INFINITY, |r| r.nll);
+    let g = (5f64.sqrt() - 1.0) / 2.0;
+    let (mut a, mut b) = EXPONENT_RANGE;
+    let mut x1 = b - g * (b - a);
+    let mut x2 = a + g * (b - a);
+    let (mut f1, mut f2) = (cost(x1), cost(x2));
+    while b - a > EXPONENT_TOL {
+        if f1 <= f2 {
+            b = x2;
+            x2 = x1;
+            f2 = f1;
+            x1 = b - g * (b - a);
+            f1 = cost(x1);
+        } else {
+            a = x1;
+            x1 = x2;
+            f1 = f2;
+            x2 = a + g * (b - a);
+            f2 = cost(x2);
+        }
+    }
+    let c = 0.5 * (a + b);
+    let fit = eval(c)?;
+    fit.nll.is_finite().then_some(PowerFit { exponent: c, fit })
+}
+
+/// The power law of every band whose line has a slope (`fitted[i]`).
+pub fn fit_powers(
+    recs: &[&RecordingTrials],
+    fitted: &[bool],
+    opts: &SurvivalOptions,
+    bin: Binning,
+) -> Vec<Option<PowerFit>> {
+    (0..fitted.len())
+        .map(|i| {
+            fitted[i]
+                .then(|| fit_power(recs, fitted.len(), i, opts, bin))
+                .flatten()
+        })
+        .collect()
+}
+
+/// The held-out comparison of the power law with the line (see the module
+/// docs).
+#[derive(Debug, Clone, PartialEq)]
+pub struct LawEvidence {
+    /// Mean held-out gain of the power law, nats per recording.
+    pub gain: f64,
+    /// One-sided sign-flip p-value.
+    pub p: f64,
+    /// Recordings compared.
+    pub recordings: usize,
+    /// Recordings the power law predicted better.
+    pub better: usize,
+}
+
+/// Compares the power law with the line on held-out recordings: `folds`
+/// folds interleaved in MOR order, each predicted by both laws fitted
+/// without it, band by band with the same freedom (each band its own edge
+/// width, ε and π), so the gain is the exponent's alone. `fitted[b]` says
+/// which bands take part.
+pub fn compare_laws(
+    recs: &[RecordingTrials],
+    fitted: &[bool],
+    opts: &SurvivalOptions,
+    bin: Binning,
+    folds: usize,
+    seed: [u8; 32],
+) -> Result<LawEvidence, String> {
+    let n_bands = fitted.len();
+    let g_n = recs.len();
+    if g_n < folds.max(3) {
+        return Err(format!(
+            "too few recordings ({g_n}) to compare the laws on held-out recordings"
+        ));
+    }
+    let mut order: Vec<usize> = (0..g_n).collect();
+    order.sort_by(|&a, &b| recs[a].mor.total_cmp(&recs[b].mor).then(a.cmp(&b)));
+    let mut fold_of = vec![0usize; g_n];
+    for (rank, &g) in order.iter().enumerate() {
+        fold_of[g] = rank % folds;
+    }
+    let lp = |p: f64| p.clamp(1e-12, 1.0 - 1e-12);
+    let mut gains = Vec::new();
+    for f in 0..folds {
+        let train: Vec<&RecordingTrials> = (0..g_n)
+            .filter(|&g| fold_of[g] != f)
+            .map(|g| &recs[g])
+            .collect();
+        // The line with the same per-band freedom (edge width, ε, π) as the
+        // power law, so the comparison weighs the exponent alone.
+        let lines: Vec<Option<SurvivalResult>> = (0..n_bands)
+            .map(|b| {
+                fitted[b]
+                    .then(|| fit_band_at(&train, n_bands, b, 1.0, opts, bin))
+                    .flatten()
+            })
+            .collect();
+        let powers = fit_powers(&train, fitted, opts, bin);
+        if powers.iter().zip(fitted).any(|(p, f)| *f && p.is_none()) {
+            return Err(
+                "the power law could not be fitted with a fold of recordings left out".into(),
+            );
+        }
+        for g in (0..g_n).filter(|&g| fold_of[g] == f) {
+            let r = &recs[g];
+            let mut d = 0.0;
+            let mut any = false;
+            for (b, power) in powers.iter().enumerate() {
+                let (Some(power), Some(line)) = (power, &lines[b]) else {
+                    continue;
+                };
+                let shift = (1.0 - power.exponent) * r.mor.ln();
+                for o in &r.bands[b] {
+                    let (Some(pl), Some(pp)) = (
+                        line.keep_probability(opts, b, o.u),
+                        power
+                            .fit
+                            .keep_probability(opts, b, (o.u.ln() + shift).exp()),
+                    ) else {
+                        continue;
+                    };
+                    let (pl, pp) = (lp(pl), lp(pp));
+                    any = true;
+                    d += o.kept * (pp / pl).ln()
+                        + (o.total - o.kept) * ((1.0 - pp) / (1.0 - pl)).ln();
+                }
+            }
+            if any {
+                gains.push(d);
+            }
+        }
+    }
+    let n = gains.len();
+    if n < 3 {
+        return Err(format!(
+            "too few recordings with fitted bands ({n}) to compare the laws"
+        ));
+    }
+    Ok(LawEvidence {
+        gain: gains.iter().sum::<f64>() / n as f64,
+        p: sign_flip_p(&gains, seed),
+        recordings: n,
+        better: gains.iter().filter(|x| **x > 0.0).count(),
+    })
+}
+
+/// One recording's trials of one band by range: `(ln r bin, kept, total)`
+/// at [`RANGE_STEP`].
+fn by_range(obs: &[Obs], ln_mor_scaled: f64) -> Vec<(i64, f64, f64)> {
+    let mut m: std::collections::BTreeMap<i64, (f64, f64)> = Default::default();
+    for o in obs {
+        let k = ((o.u.ln() + ln_mor_scaled) / RANGE_STEP).floor() as i64;
+        let e = m.entry(k).or_default();
+        e.0 += o.kept;
+        e.1 += o.total;
+    }
+    m.into_iter().map(|(k, (a, b))| (k, a, b)).collect()
+}
+
+/// The 50 % crossing of the non-increasing (isotonic) fit to the kept
+/// shares of pooled `(ln r bin, kept, total)` rows in bin order, metres.
+pub fn half_crossing(rows: &[(i64, f64, f64)]) -> Result<f64, String> {
+    // Pool-adjacent-violators for a non-increasing sequence: blocks of
+    // (weighted ln r sum, kept, total).
+    let mut blocks: Vec<(f64, f64, f64)> = Vec::new();
+    for &(k, kept, total) in rows {
+        if total <= 0.0 {
+            continue;
+        }
+        let lr = (k as f64 + 0.5) * RANGE_STEP;
+        blocks.push((lr * total, kept, total));
+        while blocks.len() >= 2 {
+            let n = blocks.len();
+            let (a, b) = (blocks[n - 2], blocks[n - 1]);
+            if a.1 / a.2 < b.1 / b.2 {
+                blocks.pop();
+                blocks[n - 2] = (a.0 + b.0, a.1 + b.1, a.2 + b.2);
+            } else {
+                break;
+            }
+        }
+    }
+    let Some(first) = blocks.first() else {
+        return Err("no clear return".into());
+    };
+    if first.1 / first.2 < 0.5 {
+        return Err("fewer than half the returns survive already at the nearest range".into());
+    }
+    for w in blocks.windows(2) {
+        let (a, b) = (w[0], w[1]);
+        let (pa, pb) = (a.1 / a.2, b.1 / b.2);
+        if pb < 0.5 {
+            let (xa, xb) = (a.0 / a.2, b.0 / b.2);
+            let t = (pa - 0.5) / (pa - pb);
+            return Ok((xa + t * (xb - xa)).exp());
+        }
+    }
+    Err("censored: more than half the returns survive to the end of the clear scene".into())
+}
+
+/// The nonparametric 50 %-survival range of one band in one MOR bin, with
+/// its bootstrap-over-recordings 95 % interval.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HalfSurvival {
+    /// The range, metres, or why there is none.
+    pub range: Result<f64, String>,
+    /// The 95 % interval, or why there is none.
+    pub ci95: Result<[f64; 2], String>,
+    /// Recordings with trials.
+    pub recordings: usize,
+    /// Trials.
+    pub trials: u64,
+}
+
+/// The 50 %-survival range of band `band` over the recordings `recs` (one
+/// MOR bin), with `replicates` bootstrap resamples of the recordings drawn
+/// from `seed`.
+pub fn half_survival(
+    recs: &[&RecordingTrials],
+    band: usize,
+    replicates: u32,
+    seed: [u8; 32],
+) -> HalfSurvival {
+    let rows: Vec<Vec<(i64, f64, f64)>> = recs
+        .iter()
+        .map(|r| by_range(&r.bands[band], r.ln_mor_scaled))
+        .filter(|v| !v.is_empty())
+        .collect();
+    let trials: f64 = rows.iter().flatten().map(|x| x.2).sum();
+    let (lo, hi) = rows
+        .iter()
+        .flatten()
+        .fold((i64::MAX, i64::MIN), |(a, b), x| (a.min(x.0), b.max(x.0)));
+    let pool = |pick: &mut dyn Iterator<Item = usize>| -> Vec<(i64, f64, f64)> {
+        let len = (hi - lo + 1).max(0) as usize;
+        let mut dense = vec![(0.0, 0.0); len];
+        for i in pick {
+            for &(k, a, b) in &rows[i] {
+                let d = &mut dense[(k - lo) as usize];
+                d.0 += a;
+                d.1 += b;
+            }
+        }
+        dense
+            .into_iter()
+            .enumerate()
+            .filter(|(_, d)| d.1 > 0.0)
+            .map(|(j, d)| (lo + j as i64, d.0, d.1))
+            .collect()
+    };
+    let n = rows.len();
+    let range = if n == 0 {
+        Err("no clear return of this band in the bin".into())
+    } else {
+        half_crossing(&pool(&mut (0..n)))
+    };
+    let ci95 = if range.is_err() {
+        Err("no range to bound".into())
+    } else if n < 2 {
+        Err("one recording: no interval over recordings".into())
+    } else if replicates == 0 {
+        Err("no bootstrap replicates asked".into())
+    } else {
+        let mut rng = ChaCha8Rng::from_seed(seed);
+        let mut reps: Vec<f64> = (0..replicates)
+            .map(|_| {
+                let mut pick = (0..n)
+                    .map(|_| rng.random_range(0..n))
+                    .collect::<Vec<_>>()
+                    .into_iter();
+                match half_crossing(&pool(&mut pick)) {
+                    Ok(r) => r,
+                    Err(e) if e.starts_with("censored") => f64::INFINITY,
+                    Err(_) => 0.0,
+                }
+            })
+            .collect();
+        reps.sort_by(f64::total_cmp);
+        let q = |p: f64| reps[((p * (reps.len() - 1) as f64).round() as usize).min(reps.len() - 1)];
+        let (a, b) = (q(0.025), q(0.975));
+        if a > 0.0 && b.is_finite() {
+            Ok([a, b])
+        } else {
+            Err("a bootstrap resample of the recordings moves the 50 % crossing out of the clear scene: the interval is unbounded".into())
+        }
+    };
+    HalfSurvival {
+        range,
+        ci95,
+        recordings: n,
+        trials: trials as u64,
+    }
+}
+
+/// The standardised distance `z` at which the fitted keep probability is
+/// ½: `π + (1 − ε − π)·S(z) = ½` (bisection; `None` when ½ is out of the
+/// curve's range).
+pub fn half_z(edge: EdgeShape, dropout: f64, residual: f64) -> Option<f64> {
+    let target = (0.5 - residual) / (1.0 - dropout - residual);
+    if !(target > 0.0 && target < 1.0) {
+        return None;
+    }
+    let (mut lo, mut hi) = (-40.0, 40.0);
+    for _ in 0..100 {
+        let mid = 0.5 * (lo + hi);
+        if edge.sf(mid) > target {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    Some(0.5 * (lo + hi))
+}
+
+/// Upper tail of the χ² law with `dof` degrees of freedom at `x`
+/// (regularised incomplete gamma `Q(dof/2, x/2)`: series below `a + 1`,
+/// continued fraction above; Numerical Recipes §6.2).
+pub fn chi2_sf(x: f64, dof: u32) -> f64 {
+    let a = dof as f64 / 2.0;
+    let x = x / 2.0;
+    if x <= 0.0 {
+        return 1.0;
+    }
+    let gln = libm::lgamma(a);
+    if x < a + 1.0 {
+        let (mut sum, mut del, mut ap) = (1.0 / a, 1.0 / a, a);
+        for _ in 0..1000 {
+            ap += 1.0;
+            del *= x / ap;
+            sum += del;
+            if del.abs() < sum.abs() * 1e-15 {
+                break;
+            }
+        }
+        (1.0 - sum * (-x + a * x.ln() - gln).exp()).clamp(0.0, 1.0)
+    } else {
+        let tiny = 1e-300;
+        let mut b = x + 1.0 - a;
+        let mut c = 1.0 / tiny;
+        let mut d = 1.0 / b;
+        let mut h = d;
+        for i in 1..1000 {
+            let an = -(i as f64) * (i as f64 - a);
+            b += 2.0;
+            d = an * d + b;
+            if d.abs() < tiny {
+                d = tiny;
+            }
+            c = b + an / c;
+            if c.abs() < tiny {
+                c = tiny;
+            }
+            d = 1.0 / d;
+            let del = d * c;
+            h *= del;
+            if (del - 1.0).abs() < 1e-15 {
+                break;
+            }
+        }
+        ((-x + a * x.ln() - gln).exp() * h).clamp(0.0, 1.0)
+    }
+}
+
+/// The χ² lack-of-fit test of a law against per-bin ranges: `bins` are
+/// `(range, [low, high], law's range)`; returns `(statistic, dof, p,
+/// worst ratio)` or `None` with fewer than two bins.
+pub fn lack_of_fit(bins: &[(f64, [f64; 2], f64)]) -> Option<(f64, u32, f64, f64)> {
+    let z975 = 1.959_963_984_540_054;
+    let mut stat = 0.0;
+    let mut k = 0u32;
+    let mut worst: f64 = 1.0;
+    for &(r, [lo, hi], l) in bins {
+        let se = (hi.ln() - lo.ln()) / (2.0 * z975);
+        if !(se > 0.0 && r > 0.0 && l > 0.0) {
+            continue;
+        }
+        stat += ((r.ln() - l.ln()) / se).powi(2);
+        k += 1;
+        if (r / l).ln().abs() > worst.ln().abs() {
+            worst = r / l;
+        }
+    }
+    (k >= 2).then(|| (stat, k - 1, chi2_sf(stat, k - 1), worst))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn chi2_known_values() {
+        // Tables: P(χ²₁ > 3.841) = 0.05, P(χ²₅ > 11.07) = 0.05,
+        // P(χ²₁₀ > 2.558) = 0.99.
+        assert!((chi2_sf(3.841_458_8, 1) - 0.05).abs() < 1e-6);
+        assert!((chi2_sf(11.070_497_7, 5) - 0.05).abs() < 1e-6);
+        assert!((chi2_sf(2.558_212_1, 10) - 0.99).abs() < 1e-6);
+    }
+
+    #[test]
+    fn isotonic_crossing_known_answer() {
+        // Kept shares 1, 0.9, 0.7 (violated by 0.8), 0.3 at ln r bins 0..4:
+        // the block (0.7, 0.8) pools to 0.75; 0.5 is crossed between it and
+        // 0.3, at t = 0.25/0.45 of the way.
+        let rows = [
+            (0, 10.0, 10.0),
+            (1, 9.0, 10.0),
+            (2, 7.0, 10.0),
+            (3, 8.0, 10.0),
+            (4, 3.0, 10.0),
+        ];
+        let r = half_crossing(&rows).unwrap();
+        let xa = 3.0 * RANGE_STEP; // centre of the pooled block (2.5 and 3.5 bins)
+        let xb = 4.5 * RANGE_STEP;
+        let want = (xa + 0.25 / 0.45 * (xb - xa)).exp();
+        assert!((r - want).abs() < 1e-12, "{r} {want}");
+        assert!(
+            half_crossing(&[(0, 9.0, 10.0)])
+                .unwrap_err()
+                .starts_with("censored")
+        );
+        assert!(half_crossing(&[(0, 1.0, 10.0)]).is_err());
+    }
+
+    #[test]
+    fn half_z_of_a_clean_edge_is_zero() {
+        assert!(half_z(EdgeShape::Probit, 0.0, 0.0).unwrap().abs() < 1e-9);
+        // With 10 % dropout the curve starts at 0.9 and is 0.45 at the
+        // centre: ½ lies before it, where S = 5/9 (z = −0.1397).
+        let z = half_z(EdgeShape::Probit, 0.1, 0.0).unwrap();
+        assert!((z + 0.139_710_298).abs() < 1e-6, "{z}");
+        assert!(half_z(EdgeShape::Probit, 0.6, 0.0).is_none());
+    }
+}

@@ -1,0 +1,116 @@
+//! A table whose bands carry a law that bends (`a·MOR^b`, murk-types'
+//! `VanishingLaw`) is applied by that law: known answers on synthetic
+//! clouds, hard and soft edge; a table without the field applies its slope
+//! as before.
+
+mod common;
+
+use common::*;
+use murk_infer::{ApplyParams, Severity};
+use murk_types::{CoefficientTable, EdgeShape, PointCloud, VanishingLaw, WeatherClass};
+
+const A: f64 = 1.6;
+const B: f64 = 0.72;
+
+fn bent_table() -> CoefficientTable {
+    let mut t = seed_table();
+    let fog = t.weathers.get_mut(&WeatherClass::Fog).unwrap();
+    for b in &mut fog.vanishing_slope {
+        b.law = Some(VanishingLaw::Power { a: A, b: B });
+    }
+    if let Some(s) = fog.survival.as_mut() {
+        s.dropout = 0.0;
+        s.residual = 0.0;
+    }
+    // Through JSON, as a published table reaches an applier.
+    CoefficientTable::from_json(&t.to_json().unwrap()).unwrap()
+}
+
+/// Hard edge: a return is kept exactly when its range is within
+/// `A·MOR^B`, at several MORs, in both bands (the slope fields say
+/// otherwise and must be ignored).
+#[test]
+fn hard_edge_keeps_exactly_the_returns_inside_the_bent_distance() {
+    let t = bent_table();
+    for mor in [20.0, 60.0, 200.0] {
+        let d = A * f64::powf(mor, B);
+        let a = ApplyParams::new(WeatherClass::Fog, Severity::Mor(mor))
+            .build(&t)
+            .unwrap();
+        assert!((a.vanishing_distance_m(5.0) - d).abs() < 1e-9 * d);
+        assert!((a.vanishing_distance_m(50.0) - d).abs() < 1e-9 * d);
+        let mut c = PointCloud::with_capacity(0);
+        let mut want = Vec::new();
+        let mut k = 0u16;
+        for f in [0.2, 0.9, 0.99, 1.01, 1.2, 3.0] {
+            for refl in [5.0f32, 50.0] {
+                c.push((f * d) as f32, 0.0, 0.0, refl, k);
+                if f < 1.0 {
+                    want.push(k);
+                }
+                k += 1;
+            }
+        }
+        let (out, _) = a.apply(&c, "bent").unwrap();
+        assert_eq!(out.ring, want, "MOR {mor}");
+    }
+}
+
+/// Soft edge (probit, width 0.1, no dropout nor residual): the kept share
+/// at `D·(1 + w·z)` is `1 − Φ(z)` within four binomial standard errors.
+#[test]
+fn soft_edge_gives_the_bent_laws_survival() {
+    let t = bent_table();
+    let mor = 80.0;
+    let d = A * f64::powf(mor, B);
+    let a = ApplyParams::new(WeatherClass::Fog, Severity::Mor(mor))
+        .soft_edge(true)
+        .seed(3)
+        .build(&t)
+        .unwrap();
+    let w = t.weathers[&WeatherClass::Fog].vanishing_slope[0]
+        .edge_width
+        .unwrap();
+    for z in [-1.0, 0.0, 1.0] {
+        let n = 20_000;
+        let r = d * (1.0 + w * z);
+        let mut c = PointCloud::with_capacity(n);
+        for i in 0..n {
+            let az = i as f64 * 1e-4;
+            c.push((r * az.cos()) as f32, (r * az.sin()) as f32, 0.0, 5.0, 0);
+        }
+        let (out, _) = a.apply(&c, &format!("soft-{z}")).unwrap();
+        let got = out.len() as f64 / n as f64;
+        let want = EdgeShape::Probit.sf(z);
+        let se = (want * (1.0 - want) / n as f64).sqrt();
+        assert!(
+            (got - want).abs() < 4.0 * se + 1e-3,
+            "z {z}: {got} vs {want}"
+        );
+    }
+}
+
+/// A table without `law` applies `slope·MOR`, and writes no `law` field.
+#[test]
+fn a_table_without_the_law_applies_its_slope() {
+    let t = seed_table();
+    let j = t.to_json().unwrap();
+    assert!(!j.contains("\"law\""));
+    let a = ApplyParams::new(WeatherClass::Fog, Severity::Mor(60.0))
+        .build(&CoefficientTable::from_json(&j).unwrap())
+        .unwrap();
+    assert!((a.vanishing_distance_m(5.0) - FOG_LOW * 60.0).abs() < 1e-12);
+}
+
+/// A law with a non-positive coefficient is refused on load, naming it.
+#[test]
+fn a_bad_law_is_refused_naming_the_field() {
+    let mut t = seed_table();
+    t.weathers
+        .get_mut(&WeatherClass::Fog)
+        .unwrap()
+        .vanishing_slope[1]
+        .law = Some(VanishingLaw::Power { a: 0.0, b: 0.7 });
+    let e = t.to_json().unwrap_err().to_string();
+    assert!(e.contains("weathers.fog.vanishing_slope[1].law"), "{e}");
+}
