@@ -69,6 +69,12 @@ pub struct RecordingRow {
     /// held-out edge test resample or leave out whole recordings from it
     /// (returns of one recording share its MOR reading and sensor state).
     pub survival: Vec<(u32, u32, u32)>,
+    /// Beside each entry of `survival`, the trials it would have kept
+    /// without weather: `Σ trials × clear survival` over its cells (the
+    /// reference's [`ClearReference::clear_survival`], 1 where unknown).
+    /// The held-out edge test uses it so that both of its models know the
+    /// scene's own flicker.
+    pub survival_clear: Vec<f64>,
     /// `ln(MOR · range_scale)` the recording's trials were binned with.
     pub ln_mor_scaled: f64,
 }
@@ -92,20 +98,28 @@ impl RecordingRow {
     }
 }
 
-/// Sorts sparse histogram cells by index and sums duplicates.
-fn merge_cells(mut v: Vec<(u32, u32, u32)>) -> Vec<(u32, u32, u32)> {
-    v.sort_unstable_by_key(|c| c.0);
+/// Sorts sparse histogram cells `(index, kept, trials, clear-expected
+/// kept)` by index (stable: equal indices keep their cell order, so the
+/// float sums are the same on every run) and sums duplicates.
+#[allow(clippy::type_complexity)]
+fn merge_cells(mut v: Vec<(u32, u32, u32, f64)>) -> (Vec<(u32, u32, u32)>, Vec<f64>) {
+    v.sort_by_key(|c| c.0);
     let mut out: Vec<(u32, u32, u32)> = Vec::with_capacity(v.len());
+    let mut clear: Vec<f64> = Vec::with_capacity(v.len());
     for c in v {
         match out.last_mut() {
             Some(l) if l.0 == c.0 => {
                 l.1 += c.1;
                 l.2 += c.2;
+                *clear.last_mut().expect("same length") += c.3;
             }
-            _ => out.push(c),
+            _ => {
+                out.push((c.0, c.1, c.2));
+                clear.push(c.3);
+            }
         }
     }
-    out
+    (out, clear)
 }
 
 /// Ghost or ring returns: distance and reflectivity histograms, and what
@@ -213,6 +227,8 @@ pub struct CellTable {
     class: Vec<u16>,
     ln_r: Vec<f64>,
     hits: Vec<u16>,
+    /// Clear survival of each cell (1 where unknown).
+    clear: Vec<f64>,
     n_cells: usize,
     /// Rays per scan: cells × revolutions per scan (median expected hits).
     rays: u64,
@@ -234,6 +250,10 @@ impl CellTable {
                 .map(|&c| (reference.range(c as usize) as f64).ln())
                 .collect(),
             hits: cells.iter().map(|&c| reference.hits(c as usize)).collect(),
+            clear: cells
+                .iter()
+                .map(|&c| reference.clear_survival(c as usize).unwrap_or(1.0))
+                .collect(),
             rays: reference.grid().cells() as u64 * reference.revolutions() as u64,
             revolutions: reference.revolutions() as u64,
             cells,
@@ -276,7 +296,7 @@ impl WeatherAcc {
         let ln_m = (mor * range_scale).ln();
         let mut kept = 0u64;
         let mut total = 0u64;
-        let mut own: Vec<(u32, u32, u32)> = Vec::with_capacity(cells.cells.len());
+        let mut own: Vec<(u32, u32, u32, f64)> = Vec::with_capacity(cells.cells.len());
         let mut hidden = vec![0u32; 0];
         if !tally.occluded.is_empty() {
             hidden = vec![0u32; cells.n_cells];
@@ -302,6 +322,7 @@ impl WeatherAcc {
                     self.survival.index(cells.class[j] as usize, b) as u32,
                     k,
                     trials as u32,
+                    trials as f64 * cells.clear[j],
                 ));
             }
             kept += k as u64;
@@ -317,6 +338,7 @@ impl WeatherAcc {
                 *o += 1;
             }
         }
+        let (survival, survival_clear) = merge_cells(own);
         self.rows.push(RecordingRow {
             index,
             id: id.to_string(),
@@ -333,7 +355,8 @@ impl WeatherAcc {
             rays,
             frames,
             revolutions: frames as u64 * cells.revolutions.max(1),
-            survival: merge_cells(own),
+            survival,
+            survival_clear,
             ln_mor_scaled: ln_m,
         });
     }

@@ -654,6 +654,13 @@ pub fn weather(
                 .iter()
                 .map(|c| acc.survival.cell_observations(&r.survival, c.clone()))
                 .collect(),
+            clear: classes
+                .iter()
+                .map(|c| {
+                    acc.survival
+                        .cell_clear_rates(&r.survival, &r.survival_clear, c.clone())
+                })
+                .collect(),
             ln_mor_scaled: r.ln_mor_scaled,
             mor: r.mor,
         })
@@ -697,26 +704,7 @@ pub fn weather(
         method: "cluster-robust over recordings".into(),
     };
     let alpha = p.edge_test_alpha();
-    // Where the MORs spread less than the edge is wide, r/MOR and r cannot
-    // be told apart: the edge is then tested against constant survival —
-    // but only where r/MOR predicted the held-out recordings at least as
-    // well as range alone (a clear scene whose far returns flicker gets a
-    // very wide fitted edge, which beats a constant, while range alone
-    // beats it on every recording).
-    let width = |i: usize| {
-        ml.as_ref()
-            .and_then(|m| m.bands.get(i))
-            .and_then(|b| b.width)
-            .unwrap_or(0.0)
-    };
-    let narrow = |i: usize, e: &EdgeEvidence| e.mor_spread < width(i) && e.gain >= 0.0;
-    let seen_in = |i: usize, e: &EdgeEvidence| {
-        if narrow(i, e) {
-            e.gain_constant > 0.0 && e.p_constant <= alpha
-        } else {
-            e.gain > 0.0 && e.p <= alpha
-        }
-    };
+    let seen_in = |_: usize, e: &EdgeEvidence| e.verdict(alpha).is_ok();
     let edge_record = |i: usize, e: &EdgeEvidence| EdgeTest {
         gain_nats_per_recording: e.gain,
         recordings_better: e.better as u32,
@@ -726,11 +714,8 @@ pub fn weather(
         gain_over_constant_nats_per_recording: e.gain_constant,
         p_value_over_constant: e.p_constant,
         mor_spread: e.mor_spread,
-        basis: if narrow(i, e) {
-            "edge against constant survival".into()
-        } else {
-            "r/MOR against range alone".into()
-        },
+        p_value_range_better: Some(e.p_range),
+        basis: crate::survival::EDGE_TEST_BASIS.into(),
         folds: p.edge_test_folds(),
         edge_seen: seen_in(i, e),
     };
@@ -751,29 +736,7 @@ pub fn weather(
                     let mut verdict: Result<(), String> = Ok(());
                     if let (Ok(_), Some(t)) = (&slope, test) {
                         match t {
-                            Ok(e) if seen_in(i, e) => {}
-                            Ok(e) if 0.5f64.powi(e.recordings as i32) > alpha => {
-                                verdict = Err(format!(
-                                    "no edge can be shown: too few recordings ({}) with returns in this band for the sign-flip test over recordings to reach its level {alpha} (it needs {})",
-                                    e.recordings,
-                                    (1.0 / alpha).log2().ceil()
-                                ))
-                            }
-                            Ok(e) if narrow(i, e) => {
-                                verdict = Err(format!(
-                                    "no edge: the MORs spread too little (sd of ln MOR {:.3} < edge width {:.3}) to tell r/MOR from range, and on held-out recordings the edge predicts survival no better than a constant (gain {:.3} nats per recording, sign-flip p {:.3} > {alpha})",
-                                    e.mor_spread,
-                                    width(i),
-                                    e.gain_constant,
-                                    e.p_constant
-                                ))
-                            }
-                            Ok(e) => {
-                                verdict = Err(format!(
-                                    "no edge: on held-out recordings survival by r/MOR predicts no better than survival by range alone (gain {:.3} nats per recording, better in {} of {} recordings, sign-flip p {:.3} > {alpha})",
-                                    e.gain, e.better, e.recordings, e.p
-                                ))
-                            }
+                            Ok(e) => verdict = e.verdict(alpha),
                             Err(why) => verdict = Err(format!("no edge can be shown: {why}")),
                         }
                     }

@@ -71,7 +71,7 @@ impl Band {
 /// | `shared_edge_width` | true | one edge width for all bands (else one per band) | |
 /// | `free_dropout` | true | fit the dropout ε per weather (else fix it to the clear-weather value) | |
 /// | `edge_test_folds` | 5 | folds over recordings of the held-out test of the edge model against survival by range alone (a slope is reported only when the edge predicts held-out recordings better) | 2–50 |
-/// | `require_edge` | false | report a slope only where the held-out edge test sees an edge (false: the test still runs and is recorded in `edge_test`, and a slope it does not confirm is kept with a warning in the band's `reason`). Off by default: its no-weather model (survival by range alone, pooled over the weather's recordings) learns the scene's own per-point flicker on a static real scene and then out-predicts a true edge (measured: the low band nulled on 3 of 3 semi-real campaigns with a known edge); it needs a no-weather model from the clear recordings first | |
+/// | `require_edge` | true | report a slope only where the held-out edge test sees an edge, null with the test's reason otherwise (false: the slope is kept and the verdict goes in the band's `reason` as a warning). The test's null is "the weather does nothing": each return's clear survival, measured on the clear recordings, times one rate (see `EdgeTest` in murk-types) | |
 /// | `edge_test_alpha` | 0.01 | level of the one-sided sign-flip test of the held-out gains over recordings (an edge needs at least ⌈log₂(1/α)⌉ recordings: 7 at 1 %) | (0, 0.5] |
 /// | `survival_log_step` | 0.01 | bin width of ln(r / MOR) in the survival histogram (1 % in range: far finer than any edge or slope the data resolve) | (0, 0.1] |
 /// | `reflectivity_floor` | 0 | lower truncation of the ghost/ring reflectivity laws | finite |
@@ -136,7 +136,7 @@ impl Default for FitParams {
             shared_edge_width: true,
             free_dropout: true,
             edge_test_folds: 5,
-            require_edge: false,
+            require_edge: true,
             edge_test_alpha: 0.01,
             survival_log_step: 0.01,
             reflectivity_floor: 0.0,

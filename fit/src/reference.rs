@@ -263,6 +263,10 @@ pub struct ClearReference {
     clear_recordings: usize,
     /// Per clear recording: (kept, total) against the leave-one-out reference.
     loo: Vec<(u64, u64)>,
+    /// Per cell: (kept, expected) of the clear recordings, each scored
+    /// against the reference built without it ((0, 0) where no recording
+    /// could be scored).
+    cell_loo: Vec<(u64, u64)>,
 }
 
 impl ClearReference {
@@ -319,6 +323,7 @@ impl ClearReference {
             present: Vec::new(),
             clear_recordings: n,
             loo: vec![(0, 0); n],
+            cell_loo: vec![(0, 0); n_cells],
             frames: frames.clone(),
         };
         let min_presence = params.reference_min_presence();
@@ -396,15 +401,20 @@ impl ClearReference {
                     };
                     reference.loo[rec].0 += kept;
                     reference.loo[rec].1 += expected;
+                    reference.cell_loo[c].0 += kept;
+                    reference.cell_loo[c].1 += expected;
                 }
             }
             // Non-members: the cell stays in their reference when its share
             // holds without them; they lost all h returns of every scan.
             if share(all_frames as f64 - mean_frames, hit_sum as f64) {
                 missing_total += h as u64;
+                let mut member_frames = 0u64;
                 for i in 0..m {
                     member_missing_total[e_rec[a + i] as usize] += h as u64;
+                    member_frames += frames[e_rec[a + i] as usize];
                 }
+                reference.cell_loo[c].1 += h as u64 * (all_frames - member_frames);
             }
         }
         for (i, t) in member_missing_total.iter().enumerate() {
@@ -458,6 +468,17 @@ impl ClearReference {
     /// without it (empty totals with a single clear recording).
     pub fn leave_one_out(&self) -> &[(u64, u64)] {
         &self.loo
+    }
+
+    /// The clear survival of `cell`: the share of its expected returns that
+    /// the clear recordings kept, each scored against the reference built
+    /// without it (a static scene's own flicker: a cell seen in 3 of 5
+    /// clear recordings survives 0.6 of the time without any weather).
+    /// `None` where no clear recording could be scored on it (a single
+    /// clear recording, or a cell that only one recording saw).
+    pub fn clear_survival(&self, cell: usize) -> Option<f64> {
+        let (k, e) = self.cell_loo[cell];
+        (e > 0).then(|| k as f64 / e as f64)
     }
 
     /// Revolutions per scan: the median expected hits per scan of the

@@ -281,6 +281,12 @@ fn semi_real_slopes(cfg: &SemiRealConfig, seeds: &[u64], label: &str) -> Vec<(f6
         for b in &fog.vanishing_slope {
             let want = truth.model.slope_at(b.reflectivity_min + 1e-9);
             let got = b.slope.unwrap_or(f64::NAN);
+            if b.slope.is_none() {
+                eprintln!(
+                    "{label} seed {seed}: null: {:?} {:?}",
+                    b.reason, b.edge_test
+                );
+            }
             eprintln!(
                 "{label} seed {seed}: band [{}, {:?}) ML slope {got:.4} truth {want:.4} ({:+.1} %)",
                 b.reflectivity_min,

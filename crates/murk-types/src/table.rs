@@ -381,45 +381,50 @@ pub struct Interval {
     pub method: String,
 }
 
-/// Held-out evidence that survival follows an edge in `r / MOR` rather than
-/// range alone (the no-weather model).
+/// Held-out evidence that the weather's survival follows an edge in
+/// `r / MOR`.
 ///
-/// Recordings are split into `folds` folds; each is predicted by both
-/// models fitted without it. Each recording's gain is the difference of its
-/// held-out log-likelihoods (edge − range alone); `p_value` is the one-sided
-/// sign-flip (randomisation) p-value of their mean over the `recordings`
-/// (exact up to 20 recordings), and the edge counts as seen (`edge_seen`)
-/// when the mean gain is positive and `p_value ≤ alpha`. Where the
-/// recordings' MORs spread less than the edge is wide (`mor_spread`, the
-/// standard deviation of `ln MOR`, below the fitted relative edge width),
-/// an edge in `r/MOR` cannot be told from one in `r`; if `r/MOR` still
-/// predicted the held-out recordings at least as well as range alone
-/// (mean gain ≥ 0), the edge is then tested against survival that depends
-/// on nothing instead
-/// (`gain_over_constant_nats_per_recording`, `p_value_over_constant`), and
-/// `basis` says which comparison decided.
+/// Recordings are split into `folds` folds; each is predicted by three
+/// models fitted without it: the edge; the clear scene's own survival of
+/// each return (measured on the clear recordings, leave-one-out) times one
+/// rate — "the weather does nothing", the null; and survival by range
+/// alone (a rate per 5 % of range, also times the clear survival). Each
+/// recording's gain is the difference of its held-out log-likelihoods. The
+/// edge counts as seen (`edge_seen`) when it beats the null (mean gain
+/// `gain_over_constant_nats_per_recording` > 0 with a one-sided sign-flip
+/// p-value over recordings `p_value_over_constant` ≤ `alpha`, exact up to
+/// 20 recordings) and range alone does not beat it significantly
+/// (`p_value_range_better` > `alpha` or the mean gain over range alone,
+/// `gain_nats_per_recording`, ≥ 0). Tables written before the null knew
+/// the clear survival decided on `p_value` (edge better than range alone)
+/// and hold no `p_value_range_better`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct EdgeTest {
-    /// Mean held-out log-likelihood gain per recording, nats.
+    /// Mean held-out log-likelihood gain of the edge over range alone per
+    /// recording, nats.
     pub gain_nats_per_recording: f64,
     /// Recordings the edge predicted better than range alone.
     pub recordings_better: u32,
     /// Recordings with returns in the band.
     pub recordings: u32,
-    /// One-sided sign-flip p-value of the mean gain.
+    /// One-sided sign-flip p-value of the mean gain over range alone.
     pub p_value: f64,
     /// The level the p-value must reach.
     pub alpha: f64,
-    /// Mean held-out gain over survival that depends on nothing, nats per
-    /// recording.
+    /// Mean held-out gain over the null — the clear scene's own survival
+    /// of each return times one rate: "the weather does nothing" — nats
+    /// per recording (older tables: over one constant rate).
     pub gain_over_constant_nats_per_recording: f64,
     /// Its one-sided sign-flip p-value.
     pub p_value_over_constant: f64,
     /// Standard deviation of `ln MOR` over the recordings.
     pub mor_spread: f64,
-    /// The comparison that decided: `r/MOR against range alone` or, where
-    /// `mor_spread` is below the edge width, `edge against constant
-    /// survival`.
+    /// One-sided sign-flip p-value that range alone predicts the held-out
+    /// recordings better than the edge.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub p_value_range_better: Option<f64>,
+    /// What decided, in words (older tables: `r/MOR against range alone`
+    /// or `edge against constant survival`).
     pub basis: String,
     /// Folds over recordings.
     pub folds: u32,

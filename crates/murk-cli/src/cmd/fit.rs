@@ -102,12 +102,11 @@ pub struct Args {
     /// Fix the dropout to the clear-weather value instead of fitting it.
     #[arg(long)]
     pub fixed_dropout: bool,
-    /// Report a slope only where the held-out edge test sees an edge (null
-    /// with the reason otherwise). Off by default: the test is always run
-    /// and written in the table's `edge_test`, but its no-weather model can
-    /// mistake a static scene's own flicker for "no edge".
+    /// Keep a slope that the held-out edge test does not confirm, with the
+    /// test's verdict in the band's `reason`, instead of reporting it null
+    /// (the default: a slope only where the data show an edge).
     #[arg(long)]
-    pub require_edge: bool,
+    pub keep_unconfirmed_slopes: bool,
     /// Bootstrap replicates for rate uncertainties.
     #[arg(long, default_value_t = 1000)]
     pub bootstrap: u32,
@@ -148,7 +147,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .edge(murk_fit::parse_edge(&args.edge)?)
         .shared_edge_width(!args.per_band_width)
         .free_dropout(!args.fixed_dropout)
-        .require_edge(args.require_edge)
+        .require_edge(!args.keep_unconfirmed_slopes)
         .bootstrap_replicates(args.bootstrap)
         .seed(args.seed)
         .radar_tolerance_m(args.radar_tolerance)
