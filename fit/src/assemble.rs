@@ -1,9 +1,9 @@
 //! From accumulated statistics to the coefficient table (no I/O).
 
 use murk_types::{
-    CountLaw, CountLawChoice, EdgeTest, Gaussian, Interval, LackOfFit, LawChoice, MorBin,
-    NoiseLaw, RainConversion, ReturnMoments, SlopeBand, SurvivalBin, SurvivalFit, SweepBand,
-    Uncertainty, WeatherClass, WeatherCoefficients,
+    CountLaw, CountLawChoice, EdgeTest, Gaussian, Interval, LackOfFit, LawChoice, MorBin, NoiseLaw,
+    RainConversion, ReturnMoments, SlopeBand, SurvivalBin, SurvivalFit, SweepBand, Uncertainty,
+    WeatherClass, WeatherCoefficients,
 };
 
 use crate::bend::{Binning, compare_laws, fit_powers, half_survival, half_z, lack_of_fit};
@@ -518,7 +518,8 @@ fn bend_and_check(
         folds as usize,
         seed("law-choice", ""),
     );
-    let bent = all_fitted && matches!(&evidence, Ok(e) if e.gain > 0.0 && e.p <= alpha);
+    let wins = all_fitted && matches!(&evidence, Ok(e) if e.gain > 0.0 && e.p <= alpha);
+    let bent = wins && p.apply_bend();
     let choice = LawChoice {
         chosen: if bent { "power" } else { "linear" }.into(),
         exponents: powers
@@ -534,6 +535,10 @@ fn bend_and_check(
         reason: match (all_fitted, &evidence) {
             (false, _) => Some("the power law could not be fitted in every band".into()),
             (_, Err(e)) => Some(e.clone()),
+            _ if wins && !bent => Some(
+                "the power law predicts held-out recordings better, but it is not applied: apply_bend is off (murk fit --bend), since a bend chosen from pooled recordings cannot tell a law that bends from a covariate left out"
+                    .into(),
+            ),
             _ => None,
         },
     };

@@ -72,6 +72,7 @@ impl Band {
 /// | `free_dropout` | true | fit the dropout ε per weather (else fix it to the clear-weather value) | |
 /// | `edge_test_folds` | 5 | folds over recordings of the held-out test of the edge model against survival by range alone (a slope is reported only when the edge predicts held-out recordings better) | 2–50 |
 /// | `require_edge` | true | report a slope only where the held-out edge test sees an edge, null with the test's reason otherwise (false: the slope is kept and the verdict goes in the band's `reason` as a warning). The test's null is "the weather does nothing": each return's clear survival, measured on the clear recordings, times one rate (see `EdgeTest` in murk-types) | |
+/// | `apply_bend` | false | write the bending law `a·MOR^b` into a band (`law`, used by `murk apply` and `murk diagnose`) when it predicts held-out recordings better than the line (`law_choice` records the comparison either way). Off by default: on a generated campaign whose survival depends on the beam's elevation (linear truth in r/MOR), the pooled data bend (exponents 1.14 and 1.4, held-out p 1e-5), and `murk diagnose` then reports survival × MOR falsely; a bend chosen from pooled recordings cannot tell a law that bends from a covariate left out | |
 /// | `edge_test_alpha` | 0.01 | level of the one-sided sign-flip test of the held-out gains over recordings (an edge needs at least ⌈log₂(1/α)⌉ recordings: 7 at 1 %) | (0, 0.5] |
 /// | `survival_log_step` | 0.01 | bin width of ln(r / MOR) in the survival histogram (1 % in range: far finer than any edge or slope the data resolve) | (0, 0.1] |
 /// | `reflectivity_floor` | 0 | lower truncation of the ghost/ring reflectivity laws | finite |
@@ -105,6 +106,8 @@ pub struct FitValidParams {
     pub(crate) free_dropout: bool,
     pub(crate) edge_test_folds: u32,
     pub(crate) require_edge: bool,
+    #[serde(default)]
+    pub(crate) apply_bend: bool,
     pub(crate) edge_test_alpha: f64,
     pub(crate) survival_log_step: f64,
     pub(crate) reflectivity_floor: f64,
@@ -137,6 +140,7 @@ impl Default for FitParams {
             free_dropout: true,
             edge_test_folds: 5,
             require_edge: true,
+            apply_bend: false,
             edge_test_alpha: 0.01,
             survival_log_step: 0.01,
             reflectivity_floor: 0.0,
@@ -203,6 +207,8 @@ impl FitParams {
         edge_test_folds: u32);
     setter!(/// Sets `require_edge`.
         require_edge: bool);
+    setter!(/// Sets `apply_bend`.
+        apply_bend: bool);
     setter!(/// Sets `edge_test_alpha`.
         edge_test_alpha: f64);
     setter!(/// Sets `survival_log_step`.
@@ -444,6 +450,11 @@ impl FitValidParams {
     /// `require_edge`.
     pub fn require_edge(&self) -> bool {
         self.require_edge
+    }
+
+    /// `apply_bend`.
+    pub fn apply_bend(&self) -> bool {
+        self.apply_bend
     }
 
     /// `edge_test_alpha`.

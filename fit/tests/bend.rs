@@ -30,6 +30,7 @@ fn fit_binned(path: &Path, replicates: u32, mor_bin_m: f64) -> FittedTable {
     FitParams::default()
         .bootstrap_replicates(replicates)
         .mor_bin_width_m(mor_bin_m)
+        .apply_bend(true)
         .check()
         .unwrap()
         .fit(&campaign)

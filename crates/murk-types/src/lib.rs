@@ -76,8 +76,8 @@ pub use table::{
     ClearCoefficients, CoefficientTable, CountLaw, CountLawChoice, CountUnit, EdgeTest,
     ExcludedRecording, Gaussian, InputDigest, Interval, LackOfFit, LawChoice, MorBin, NoiseLaw,
     Provenance, RadarCoefficients, RainConversion, ReturnMoments, RingGeometry, SensorGeometry,
-    SlopeBand, SurvivalBin,
-    SurvivalFit, SweepBand, TABLE_FORMAT, TableLidar, Uncertainty, WeatherCoefficients,
+    SlopeBand, SurvivalBin, SurvivalFit, SweepBand, TABLE_FORMAT, TableLidar, Uncertainty,
+    WeatherCoefficients,
 };
 pub use vanishing::VanishingLaw;
 pub use walk::{LeftOut, Walk, WalkedFile, walk_folder};

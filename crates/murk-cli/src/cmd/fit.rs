@@ -107,6 +107,13 @@ pub struct Args {
     /// (the default: a slope only where the data show an edge).
     #[arg(long)]
     pub keep_unconfirmed_slopes: bool,
+    /// Apply the vanishing law that bends (`a·MOR^b`) where it predicts
+    /// held-out recordings better than the line. Off by default: the
+    /// comparison is always made and written in `law_choice`, but a bend
+    /// chosen from pooled recordings can stand in for a covariate left out
+    /// (see `murk diagnose`).
+    #[arg(long)]
+    pub bend: bool,
     /// Bootstrap replicates for rate uncertainties.
     #[arg(long, default_value_t = 1000)]
     pub bootstrap: u32,
@@ -148,6 +155,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .shared_edge_width(!args.per_band_width)
         .free_dropout(!args.fixed_dropout)
         .require_edge(!args.keep_unconfirmed_slopes)
+        .apply_bend(args.bend)
         .bootstrap_replicates(args.bootstrap)
         .seed(args.seed)
         .radar_tolerance_m(args.radar_tolerance)
