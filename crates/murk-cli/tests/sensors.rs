@@ -158,19 +158,29 @@ fn an_empty_band_works_end_to_end() {
 
 #[test]
 fn an_hdl64_like_sensor_works_end_to_end() {
-    let (dir, camp) = generated(|c| {
-        // 64 rings: +2° to −8.33° by 1/3°, then −8.83° to −24.33° by 1/2°
-        // (the HDL-64E's two blocks), fired every 0.4° at a 0.13° phase.
-        c.lidar.model = "HDL64".into();
-        c.lidar.elevation_deg = (0..32)
-            .map(|k| 2.0 - k as f64 / 3.0)
-            .chain((0..32).map(|k| -8.83 - k as f64 * 0.5))
-            .collect();
-        c.lidar.azimuth_resolution_deg = 0.8;
-        c.sensor.azimuth_phase_deg = 0.13;
-        c.campaign.recordings = 24;
-    });
+    let (dir, camp) = generated(|c| hdl64(c, "pcd"));
     let (t, _, _) = fit_apply_diagnose(&camp, dir.path());
+    check_hdl64(&t);
+}
+
+/// An HDL-64-like sensor written in `format`: 64 rings, +2° to −8.33° by
+/// 1/3°, then −8.83° to −24.33° by 1/2° (the HDL-64E's two blocks), fired
+/// every 0.8° at a 0.13° phase, 24 recordings.
+fn hdl64(c: &mut GeneratorConfig, format: &str) {
+    c.lidar.model = "HDL64".into();
+    c.lidar.elevation_deg = (0..32)
+        .map(|k| 2.0 - k as f64 / 3.0)
+        .chain((0..32).map(|k| -8.83 - k as f64 * 0.5))
+        .collect();
+    c.lidar.azimuth_resolution_deg = 0.8;
+    c.sensor.azimuth_phase_deg = 0.13;
+    c.campaign.recordings = 24;
+    c.campaign.format = format.into();
+}
+
+/// The table of [`hdl64`]'s campaign: its 64 rings and step measured, no
+/// warning, clear no-change ≥ 0.97.
+fn check_hdl64(t: &CoefficientTable) {
     let g = t.lidar.geometry.as_ref().unwrap();
     assert_eq!(g.rings.len(), 64);
     assert!(
@@ -189,17 +199,7 @@ fn an_hdl64_like_sensor_works_end_to_end() {
 /// `murk apply` (`--bin-layout xyzir`), since the bytes alone fit several.
 #[test]
 fn a_five_column_bin_hdl64_works_end_to_end() {
-    let (dir, camp) = generated(|c| {
-        c.lidar.model = "HDL64".into();
-        c.lidar.elevation_deg = (0..32)
-            .map(|k| 2.0 - k as f64 / 3.0)
-            .chain((0..32).map(|k| -8.83 - k as f64 * 0.5))
-            .collect();
-        c.lidar.azimuth_resolution_deg = 0.8;
-        c.sensor.azimuth_phase_deg = 0.13;
-        c.campaign.recordings = 24;
-        c.campaign.format = "pcd.bin".into();
-    });
+    let (dir, camp) = generated(|c| hdl64(c, "pcd.bin"));
     // nuScenes' `.pcd.bin` holds the same five floats: rename to `.bin`
     // and declare the layout.
     for e in std::fs::read_dir(camp.join("lidar")).unwrap() {
@@ -213,16 +213,7 @@ fn a_five_column_bin_hdl64_works_end_to_end() {
     let toml = toml.replacen("[lidar]", "[lidar]\nbin_layout = \"xyzir\"", 1);
     std::fs::write(camp.join("campaign.toml"), toml).unwrap();
     let (t, _, r) = fit_apply_diagnose_with(&camp, dir.path(), "bin", &["--bin-layout", "xyzir"]);
-    let g = t.lidar.geometry.as_ref().unwrap();
-    assert_eq!(g.rings.len(), 64);
-    assert!(
-        (g.azimuth_step_deg - 0.8).abs() < 1e-9,
-        "{}",
-        g.azimuth_step_deg
-    );
-    assert!(t.lidar.warnings.is_empty(), "{:?}", t.lidar.warnings);
-    let clear = t.clear.as_ref().unwrap().no_change_rate.unwrap();
-    assert!(clear >= 0.97, "clear no-change {clear}");
+    check_hdl64(&t);
     let fog = &t.weathers[&murk_types::WeatherClass::Fog];
     assert!(
         fog.vanishing_slope.iter().any(|b| b.slope.is_some()),
