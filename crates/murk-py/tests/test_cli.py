@@ -43,7 +43,8 @@ def run_cli(cli, *args):
 
 @pytest.mark.parametrize("name, cols, layout", SCANS)
 @pytest.mark.parametrize("weather, flags, kwargs", VARIANTS)
-def test_apply_bytes_equal_cli(tmp_path, cli, fitted, name, cols, layout, weather, flags, kwargs):
+def test_apply_bytes_equal_cli(tmp_path, cli, fitted_every_weather, name, cols, layout, weather, flags, kwargs):
+    fitted = fitted_every_weather
     src = real(name)
     table = murk.Table.load(fitted)
     if weather not in table.weathers:
