@@ -709,8 +709,7 @@ pub fn weather(
         method: "cluster-robust over recordings".into(),
     };
     let alpha = p.edge_test_alpha();
-    let seen_in = |_: usize, e: &EdgeEvidence| e.verdict(alpha).is_ok();
-    let edge_record = |i: usize, e: &EdgeEvidence| EdgeTest {
+    let edge_record = |e: &EdgeEvidence| EdgeTest {
         gain_nats_per_recording: e.gain,
         recordings_better: e.better as u32,
         recordings: e.recordings as u32,
@@ -722,7 +721,7 @@ pub fn weather(
         p_value_range_better: Some(e.p_range),
         basis: crate::survival::EDGE_TEST_BASIS.into(),
         folds: p.edge_test_folds(),
-        edge_seen: seen_in(i, e),
+        edge_seen: e.verdict(alpha).is_ok(),
     };
 
     let vanishing_slope: Vec<SlopeBand> = bands
@@ -769,7 +768,7 @@ pub fn weather(
                             .map(|(_, ci)| interval(ci)),
                         edge_test: test
                             .and_then(|t| t.as_ref().ok())
-                            .map(|e| edge_record(i, e)),
+                            .map(edge_record),
                         edge_width: m.bands[i].width,
                         edge_width_ci95: robust.widths.get(i).copied().flatten().map(&interval),
                         mor_bins: vec![],

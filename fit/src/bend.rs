@@ -194,12 +194,8 @@ pub fn compare_laws(
             "too few recordings ({g_n}) to compare the laws on held-out recordings"
         ));
     }
-    let mut order: Vec<usize> = (0..g_n).collect();
-    order.sort_by(|&a, &b| recs[a].mor.total_cmp(&recs[b].mor).then(a.cmp(&b)));
-    let mut fold_of = vec![0usize; g_n];
-    for (rank, &g) in order.iter().enumerate() {
-        fold_of[g] = rank % folds;
-    }
+    let mors: Vec<f64> = recs.iter().map(|r| r.mor).collect();
+    let fold_of = crate::stats::interleaved_folds(&mors, folds);
     let lp = |p: f64| p.clamp(1e-12, 1.0 - 1e-12);
     let mut gains = Vec::new();
     for f in 0..folds {

@@ -900,17 +900,8 @@ pub fn edge_test(
             n_b
         ];
     }
-    let mut order: Vec<usize> = (0..g_n).collect();
-    order.sort_by(|&a, &b| {
-        recordings[a]
-            .mor
-            .total_cmp(&recordings[b].mor)
-            .then(a.cmp(&b))
-    });
-    let mut fold_of = vec![0usize; g_n];
-    for (rank, &g) in order.iter().enumerate() {
-        fold_of[g] = rank % folds;
-    }
+    let mors: Vec<f64> = recordings.iter().map(|r| r.mor).collect();
+    let fold_of = crate::stats::interleaved_folds(&mors, folds);
     let clear_of =
         |r: &RecordingTrials, b: usize, j: usize| r.clear[b].get(j).copied().unwrap_or(1.0);
     // Range-only tables: per band, ln r bin → (kept, clear-expected kept),

@@ -515,12 +515,8 @@ pub fn fit_count_law(
     }
     // Folds by MOR rank, so each spans the range.
     let k = CHOICE_FOLDS.min(n);
-    let mut order: Vec<usize> = (0..n).collect();
-    order.sort_by(|&a, &b| obs[a].l.total_cmp(&obs[b].l).then(a.cmp(&b)));
-    let mut fold = vec![0usize; n];
-    for (rank, &i) in order.iter().enumerate() {
-        fold[i] = rank % k;
-    }
+    let ls: Vec<f64> = obs.iter().map(|o| o.l).collect();
+    let fold = crate::stats::interleaved_folds(&ls, k);
     let mut ll_power = vec![0.0; n];
     let mut ll_onset = vec![0.0; n];
     let mut onset_ok = true;
