@@ -526,6 +526,29 @@ fn bend_and_check(
             .iter()
             .map(|f| f.as_ref().map(|f| f.exponent))
             .collect(),
+        exponent_ci95: match &evidence {
+            Ok(e) => powers
+                .iter()
+                .enumerate()
+                .map(|(b, f)| {
+                    let f = f.as_ref()?;
+                    let leave_out: Vec<Option<f64>> =
+                        e.fold_exponents.iter().map(|fe| fe[b]).collect();
+                    let [low, high] = crate::bend::jackknife_interval(f.exponent, &leave_out).ok()?;
+                    Some(Interval {
+                        low,
+                        high,
+                        level: 0.95,
+                        method: format!(
+                            "grouped jackknife over {} folds of recordings (Student t on {} df)",
+                            leave_out.len(),
+                            leave_out.len() - 1
+                        ),
+                    })
+                })
+                .collect(),
+            Err(_) => Vec::new(),
+        },
         gain_nats_per_recording: evidence.as_ref().map_or(0.0, |e| e.gain),
         recordings_better: evidence.as_ref().map_or(0, |e| e.better as u32),
         recordings: evidence.as_ref().map_or(0, |e| e.recordings as u32),

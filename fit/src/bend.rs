@@ -172,6 +172,9 @@ pub struct LawEvidence {
     pub recordings: usize,
     /// Recordings the power law predicted better.
     pub better: usize,
+    /// `fold_exponents[f][b]`: band `b`'s exponent fitted without fold `f`
+    /// (`None` for a band that takes no part).
+    pub fold_exponents: Vec<Vec<Option<f64>>>,
 }
 
 /// Compares the power law with the line on held-out recordings: `folds`
@@ -198,6 +201,7 @@ pub fn compare_laws(
     let fold_of = crate::stats::interleaved_folds(&mors, folds);
     let lp = |p: f64| p.clamp(1e-12, 1.0 - 1e-12);
     let mut gains = Vec::new();
+    let mut fold_exponents = Vec::with_capacity(folds);
     for f in 0..folds {
         let train: Vec<&RecordingTrials> = (0..g_n)
             .filter(|&g| fold_of[g] != f)
@@ -218,6 +222,12 @@ pub fn compare_laws(
                 "the power law could not be fitted with a fold of recordings left out".into(),
             );
         }
+        fold_exponents.push(
+            powers
+                .iter()
+                .map(|p| p.as_ref().map(|p| p.exponent))
+                .collect(),
+        );
         for g in (0..g_n).filter(|&g| fold_of[g] == f) {
             let r = &recs[g];
             let mut d = 0.0;
@@ -258,7 +268,38 @@ pub fn compare_laws(
         p: sign_flip_p(&gains, seed),
         recordings: n,
         better: gains.iter().filter(|x| **x > 0.0).count(),
+        fold_exponents,
     })
+}
+
+/// The grouped-jackknife 95 % interval of an exponent from its fits with
+/// each of `k` folds of recordings left out (`k ≥ 3`): centre `estimate`,
+/// variance `(k − 1)/k · Σ (θ₋f − θ̄)²`, Student's t on `k − 1` degrees of
+/// freedom. A resampling interval over recordings, like every interval of
+/// the table, reusing the held-out comparison's fits instead of new ones.
+/// `Err` when a fold's exponent is missing or any fit sits within the
+/// search's precision of the searched range's ends (the profile did not
+/// find an interior optimum, so its spread says nothing).
+pub fn jackknife_interval(estimate: f64, leave_out: &[Option<f64>]) -> Result<[f64; 2], String> {
+    let k = leave_out.len();
+    if k < 3 {
+        return Err(format!("{k} folds are too few for a jackknife interval"));
+    }
+    let Some(th): Option<Vec<f64>> = leave_out.iter().copied().collect() else {
+        return Err("the exponent could not be fitted with a fold left out".into());
+    };
+    let (lo, hi) = EXPONENT_RANGE;
+    let edge = |c: f64| c <= lo + 2.0 * EXPONENT_TOL || c >= hi - 2.0 * EXPONENT_TOL;
+    if edge(estimate) || th.iter().any(|&c| edge(c)) {
+        return Err(format!(
+            "an exponent sits at the end of the searched range [{lo}, {hi}]"
+        ));
+    }
+    let kf = k as f64;
+    let mean = th.iter().sum::<f64>() / kf;
+    let var = (kf - 1.0) / kf * th.iter().map(|c| (c - mean).powi(2)).sum::<f64>();
+    let half = crate::survival::student_t_975(kf - 1.0) * var.sqrt();
+    Ok([estimate - half, estimate + half])
 }
 
 /// One recording's trials of one band by range: `(ln r bin, kept, total)`
@@ -503,6 +544,20 @@ pub fn lack_of_fit(bins: &[(f64, [f64; 2], f64)]) -> Option<(f64, u32, f64, f64)
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn jackknife_interval_known_answer() {
+        // Five leave-out fits 0.9, 0.95, 1.0, 1.05, 1.1: mean 1, Σ dev² =
+        // 0.025, variance 4/5 · 0.025 = 0.02, t₄ = 2.776.
+        let th = [Some(0.9), Some(0.95), Some(1.0), Some(1.05), Some(1.1)];
+        let [lo, hi] = jackknife_interval(1.0, &th).unwrap();
+        let half = 2.776_445 * 0.02f64.sqrt();
+        assert!((lo - (1.0 - half)).abs() < 1e-3, "{lo}");
+        assert!((hi - (1.0 + half)).abs() < 1e-3, "{hi}");
+        assert!(jackknife_interval(1.0, &th[..2]).is_err());
+        assert!(jackknife_interval(1.0, &[Some(1.0), None, Some(1.0)]).is_err());
+        assert!(jackknife_interval(1.0, &[Some(0.2), Some(1.0), Some(1.0)]).is_err());
+    }
 
     #[test]
     fn chi2_known_values() {

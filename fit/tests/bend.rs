@@ -118,6 +118,22 @@ fn physics_fog_bends_and_the_bent_law_meets_the_truth_in_every_bin() {
             choice.exponents.iter().flatten().all(|e| *e < 0.95),
             "seed {seed}: {choice:?}"
         );
+        // Each exponent's interval is there, holds the estimate, and
+        // excludes the line (b = 1): the bend is told, not only chosen.
+        for (e, ci) in choice.exponents.iter().zip(&choice.exponent_ci95) {
+            let (Some(e), Some(ci)) = (e, ci) else {
+                panic!("seed {seed}: an exponent without its interval: {choice:?}");
+            };
+            eprintln!(
+                "physics seed {seed}: exponent {e:.3} [{:.3}, {:.3}]",
+                ci.low, ci.high
+            );
+            assert!(ci.low < *e && *e < ci.high, "seed {seed}: {ci:?}");
+            assert!(
+                ci.high < 1.0,
+                "seed {seed}: the interval holds the line: {ci:?}"
+            );
+        }
         for b in &fog.vanishing_slope {
             let Some(_) = b.slope else {
                 eprintln!(
@@ -231,6 +247,18 @@ fn bent_tables_are_the_same_bytes_on_one_and_two_threads() {
 fn linear_truth_keeps_the_line_in_most_seeds() {
     let mut kept = 0;
     let mut n = 0;
+    // Intervals of the exponent that hold the truth (b = 1), of those given.
+    let (mut covered, mut intervals) = (0usize, 0usize);
+    let mut cover = |choice: &murk_types::LawChoice, what: &str| {
+        for ci in choice.exponent_ci95.iter().flatten() {
+            intervals += 1;
+            covered += usize::from(ci.low <= 1.0 && 1.0 <= ci.high);
+            eprintln!(
+                "  {what}: exponent interval [{:.3}, {:.3}]",
+                ci.low, ci.high
+            );
+        }
+    };
     for seed in 1u64..=4 {
         let mut c = GeneratorConfig::preset(Preset::Small);
         c.campaign.recordings = 40;
@@ -256,6 +284,7 @@ fn linear_truth_keeps_the_line_in_most_seeds() {
                 "generator seed {seed} {w}: chosen {} exponents {:?} gain {:.3} p {:.4}",
                 choice.chosen, choice.exponents, choice.gain_nats_per_recording, choice.p_value
             );
+            cover(choice, &format!("generator seed {seed} {w}"));
             let (lo, hi) = (coeffs.mor_min_m.unwrap(), coeffs.mor_max_m.unwrap());
             for b in &coeffs.vanishing_slope {
                 let (Some(law), Some(_)) = (b.vanishing_law(), b.slope) else {
@@ -290,10 +319,23 @@ fn linear_truth_keeps_the_line_in_most_seeds() {
                 "semi-real seed {seed}: chosen {} exponents {:?} gain {:.3} p {:.4}",
                 choice.chosen, choice.exponents, choice.gain_nats_per_recording, choice.p_value
             );
+            cover(choice, &format!("semi-real seed {seed}"));
             n += 1;
             kept += usize::from(choice.chosen == "linear");
         }
     }
     eprintln!("linear truth: the line kept in {kept} of {n} fits");
+    eprintln!("linear truth: exponent intervals holding b = 1: {covered} of {intervals}");
+    // Measured when the interval was added: 13 of 18 (72 %) for nominal
+    // 95 %. The misses are exponents a few per cent from 1 (0.945 in rain,
+    // 0.976 in fog, 1.02 in fog) with narrow intervals: a bias of the
+    // exponent's estimate on these sources, not a width the jackknife could
+    // fix. The bound keeps that level from getting worse, and the docs say
+    // the interval under-covers.
+    assert!(intervals >= 10, "only {intervals} exponent intervals");
+    assert!(
+        covered * 3 >= intervals * 2,
+        "{covered} of {intervals} hold b = 1"
+    );
     assert!(n > 0 && kept * 4 >= n * 3, "line kept in {kept} of {n}");
 }

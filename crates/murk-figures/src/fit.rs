@@ -36,14 +36,18 @@ fn group_colour(g: usize) -> RGBColor {
 /// Width of the legend strip right of a chart, pixels.
 const LEGEND_W: u32 = 330;
 
-/// A line through the origin, `range = slope · MOR`.
+/// A curve through the origin, `range = slope · MOR^exponent`: a line
+/// (`exponent` 1) or a band's bent law `a·MOR^b`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SlopeLine {
     /// Legend label, as the table names the value
     /// (`vanishing_slope [0, 10) = 0.3`).
     pub label: String,
-    /// Slope (range per metre of MOR, range scale included).
+    /// Slope (range per metre of MOR, range scale included), or the bent
+    /// law's coefficient `a` times the range scale.
     pub slope: f64,
+    /// Exponent of MOR: 1 for a line, `b` for a bent law.
+    pub exponent: f64,
     /// Colour group (one per reflectivity band); the markers of the same
     /// group share its colour.
     pub group: usize,
@@ -235,11 +239,12 @@ pub fn range_vs_mor(
     )
 }
 
-/// The points of `y = slope · x` over `[x0, x1]` that stay below `ymax`
-/// (a line leaving the chart ends at its edge instead of running along it).
-fn clipped_line(slope: f64, x0: f64, x1: f64, ymax: f64) -> Vec<(f64, f64)> {
-    let end = if slope > 0.0 {
-        x1.min(ymax / slope)
+/// The points of `y = slope · x^exponent` over `[x0, x1]` that stay below
+/// `ymax` (a curve leaving the chart ends at its edge instead of running
+/// along it).
+fn clipped_line(slope: f64, exponent: f64, x0: f64, x1: f64, ymax: f64) -> Vec<(f64, f64)> {
+    let end = if slope > 0.0 && exponent > 0.0 {
+        x1.min((ymax / slope).powf(1.0 / exponent))
     } else {
         x1
     };
@@ -249,7 +254,7 @@ fn clipped_line(slope: f64, x0: f64, x1: f64, ymax: f64) -> Vec<(f64, f64)> {
     (0..=50)
         .map(|k| {
             let x = x0 + (end - x0) * k as f64 / 50.0;
-            (x, slope * x)
+            (x, slope * x.max(0.0).powf(exponent))
         })
         .collect()
 }
@@ -336,7 +341,7 @@ fn draw_range_mor<DB: DrawingBackend>(
     }
     for l in d.lines {
         let colour = group_colour(l.group);
-        let pts = clipped_line(l.slope, x0, x1, ymax);
+        let pts = clipped_line(l.slope, l.exponent, x0, x1, ymax);
         if l.seed {
             chart
                 .draw_series(DashedLineSeries::new(pts, 8, 5, colour.stroke_width(2)))
@@ -793,12 +798,14 @@ mod tests {
             SlopeLine {
                 label: "vanishing_slope [0, ∞) = 0.03".into(),
                 slope: 0.03,
+                exponent: 1.0,
                 group: 0,
                 seed: false,
             },
             SlopeLine {
                 label: "vanishing_slope_q99 [0, ∞) = 0.02".into(),
                 slope: 0.02,
+                exponent: 1.0,
                 group: 0,
                 seed: true,
             },
@@ -874,7 +881,7 @@ mod tests {
 
     #[test]
     fn lines_end_at_the_top_of_the_chart() {
-        let pts = clipped_line(0.5, 0.0, 100.0, 20.0);
+        let pts = clipped_line(0.5, 1.0, 0.0, 100.0, 20.0);
         let last = *pts.last().unwrap();
         assert!(
             (last.0 - 40.0).abs() < 1e-9 && (last.1 - 20.0).abs() < 1e-9,
@@ -882,9 +889,19 @@ mod tests {
         );
         assert!(pts.iter().all(|p| p.1 <= 20.0 + 1e-9));
         assert_eq!(
-            clipped_line(0.1, 0.0, 100.0, 20.0).last(),
+            clipped_line(0.1, 1.0, 0.0, 100.0, 20.0).last(),
             Some(&(100.0, 10.0))
         );
+        // A bent law 2·x^0.5 meets the top (20) at x = 100 and is a curve:
+        // at x = 25 it is 10, not the chord's 5.
+        let bent = clipped_line(2.0, 0.5, 0.0, 400.0, 20.0);
+        let last = *bent.last().unwrap();
+        assert!(
+            (last.0 - 100.0).abs() < 1e-9 && (last.1 - 20.0).abs() < 1e-9,
+            "{last:?}"
+        );
+        let quarter = bent.iter().find(|p| (p.0 - 26.0).abs() < 1e-9).unwrap();
+        assert!((quarter.1 - 2.0 * 26f64.sqrt()).abs() < 1e-9, "{quarter:?}");
     }
 
     #[test]

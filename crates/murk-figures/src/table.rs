@@ -62,14 +62,31 @@ pub fn range_mor_lines(c: &WeatherCoefficients, range_scale: f64) -> RangeMorLin
     };
     for (g, b) in c.vanishing_slope.iter().enumerate() {
         let band = band_label(b.reflectivity_min, b.reflectivity_max);
-        match b.slope {
-            Some(s) => out.lines.push(SlopeLine {
+        match (b.slope, b.law) {
+            // A band with a bent law: the law apply uses is drawn; the
+            // line's slope, kept in the table, is said.
+            (Some(s), Some(murk_types::VanishingLaw::Power { a, b: e })) => {
+                out.lines.push(SlopeLine {
+                    label: format!("law {band} = {}·MOR^{}", short(a), short(e)),
+                    slope: a * range_scale,
+                    exponent: e,
+                    group: g,
+                    seed: false,
+                });
+                out.notes.push(format!(
+                    "vanishing_slope {band} = {}: the line, not drawn; apply uses the band's law (law_choice: {})",
+                    short(s),
+                    c.law_choice.as_ref().map_or("power", |l| l.chosen.as_str())
+                ));
+            }
+            (Some(s), _) => out.lines.push(SlopeLine {
                 label: format!("vanishing_slope {band} = {}", short(s)),
                 slope: s * range_scale,
+                exponent: 1.0,
                 group: g,
                 seed: false,
             }),
-            None => out.notes.push(null_note("vanishing_slope", b)),
+            (None, _) => out.notes.push(null_note("vanishing_slope", b)),
         }
         let Some(q) = c.vanishing_slope_q99.iter().find(|q| group_of(q) == g) else {
             continue;
@@ -78,6 +95,7 @@ pub fn range_mor_lines(c: &WeatherCoefficients, range_scale: f64) -> RangeMorLin
             Some(s) => out.lines.push(SlopeLine {
                 label: format!("{q_field} {band} = {}", short(s)),
                 slope: s * range_scale,
+                exponent: 1.0,
                 group: g,
                 seed: true,
             }),
@@ -109,6 +127,37 @@ pub fn range_mor_lines(c: &WeatherCoefficients, range_scale: f64) -> RangeMorLin
             "markers: the table's mor_bins, all reflectivities together (no band lists its own)"
                 .into(),
         );
+    }
+    if let Some(l) = c.law_choice.as_ref().filter(|l| l.chosen != "power") {
+        // The bend was compared but is not drawn: say what it found.
+        let bends: Vec<String> = c
+            .vanishing_slope
+            .iter()
+            .zip(&l.exponents)
+            .enumerate()
+            .filter_map(|(i, (b, e))| {
+                let e = (*e)?;
+                let ci = l
+                    .exponent_ci95
+                    .get(i)
+                    .and_then(|c| c.as_ref())
+                    .map_or(String::new(), |c| {
+                        format!(" [{}, {}]", short(c.low), short(c.high))
+                    });
+                Some(format!(
+                    "{} b = {}{ci}",
+                    band_label(b.reflectivity_min, b.reflectivity_max),
+                    short(e)
+                ))
+            })
+            .collect();
+        if !bends.is_empty() {
+            out.notes.push(format!(
+                "law_choice: linear (bent law a·MOR^b not applied; {}; held-out p {})",
+                bends.join(", "),
+                short(l.p_value)
+            ));
+        }
     }
     if range_scale != 1.0 {
         out.notes.push(format!(

@@ -94,6 +94,81 @@ fn range_scale_is_drawn_and_said() {
 }
 
 #[test]
+fn a_bent_law_is_drawn_as_the_law_and_the_line_is_said() {
+    let mut fog = common::fog();
+    fog.vanishing_slope[0].law = Some(murk_types::VanishingLaw::Power { a: 1.5, b: 0.7 });
+    fog.law_choice = Some(murk_types::LawChoice {
+        chosen: "power".into(),
+        exponents: vec![Some(0.7), None],
+        exponent_ci95: vec![],
+        gain_nats_per_recording: 3.0,
+        recordings_better: 20,
+        recordings: 24,
+        p_value: 0.001,
+        alpha: 0.01,
+        folds: 5,
+        reason: None,
+    });
+    let l = range_mor_lines(&fog, 1.0);
+    let bent = l
+        .lines
+        .iter()
+        .find(|x| x.label == "law [0, 10) = 1.5·MOR^0.7")
+        .unwrap_or_else(|| panic!("{:?}", l.lines));
+    assert_eq!(
+        (bent.slope, bent.exponent, bent.group, bent.seed),
+        (1.5, 0.7, 0, false)
+    );
+    // The band's line is not drawn beside its law, but said.
+    assert!(
+        !l.lines
+            .iter()
+            .any(|x| x.label == "vanishing_slope [0, 10) = 0.3")
+    );
+    assert!(
+        l.notes
+            .iter()
+            .any(|n| n.starts_with("vanishing_slope [0, 10) = 0.3: the line, not drawn")),
+        "{:?}",
+        l.notes
+    );
+    // The other band keeps its line.
+    assert!(
+        l.lines
+            .iter()
+            .any(|x| x.label == "vanishing_slope [10, ∞) = 0.34" && x.exponent == 1.0)
+    );
+    let (legend, _) = svg_of_range_mor(&fog);
+    assert!(
+        legend.iter().any(|x| x == "law [0, 10) = 1.5·MOR^0.7"),
+        "{legend:?}"
+    );
+
+    // A bend compared but not applied is said with its interval.
+    fog.vanishing_slope[0].law = None;
+    let choice = fog.law_choice.as_mut().unwrap();
+    choice.chosen = "linear".into();
+    choice.exponent_ci95 = vec![
+        Some(murk_types::Interval {
+            low: 0.6,
+            high: 0.8,
+            level: 0.95,
+            method: "grouped jackknife".into(),
+        }),
+        None,
+    ];
+    let l = range_mor_lines(&fog, 1.0);
+    assert!(l.lines.iter().all(|x| x.exponent == 1.0));
+    assert!(
+        l.notes
+            .iter()
+            .any(|n| n.contains("law_choice: linear") && n.contains("[0, 10) b = 0.7 [0.6, 0.8]")),
+        "{:?}",
+        l.notes
+    );
+}
+
+#[test]
 fn markers_fall_back_to_the_all_reflectivity_bins_and_say_so() {
     let mut fog = common::fog();
     for b in &mut fog.vanishing_slope_q99 {

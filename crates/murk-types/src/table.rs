@@ -347,6 +347,13 @@ pub struct LawChoice {
     /// Per band of `vanishing_slope`, the exponent `b` of its power law
     /// fitted on all recordings (null for a band without a slope).
     pub exponents: Vec<Option<f64>>,
+    /// Per band, the 95 % interval of its exponent: a grouped jackknife
+    /// over the held-out comparison's folds of recordings (each fold's fit
+    /// without it), Student's t on folds − 1 degrees of freedom; null for a
+    /// band without an exponent, or when a fold's exponent is missing or
+    /// sits at the searched range's end. Absent in tables before it.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub exponent_ci95: Vec<Option<Interval>>,
     /// Mean held-out gain of the bent law over the line, nats per
     /// recording.
     pub gain_nats_per_recording: f64,
