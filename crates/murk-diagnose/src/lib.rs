@@ -16,7 +16,9 @@
 //!    murk-infer simulations from the nearest clear recording.
 //! 3. **Attribute** ([`attribution`]): each observable's held-out residual
 //!    against every point-level covariate (`range`, `reflectivity`, `ring`,
-//!    `elevation`, `azimuth`) and every scan-level one (`mor`, `timestamp`,
+//!    `elevation`, `azimuth`; for counts the rays' `ring`, `elevation` and
+//!    `azimuth`, the ghost and ring returns counted per laser and azimuth
+//!    sector, [`data::NearHistogram`]) and every scan-level one (`mor`, `timestamp`,
 //!    every `weather.csv` column, known or not), with permutation tests over
 //!    recordings, Holm's adjustment over all tests, and a relevance threshold
 //!    per observable ([`Relevance`]). A finding is *significant* only when
@@ -376,10 +378,27 @@ struct Test {
     outcome: TestOutcome,
 }
 
+/// The point-level covariates of a residual unit: a clear return's, or a
+/// count unit's (a laser or an azimuth sector of the ghost and ring returns).
+#[derive(Debug, Clone, Copy)]
+enum UnitCov {
+    Point(murk_types::PointCovariates),
+    Count(evaluate::CountCovariates),
+}
+
+impl UnitCov {
+    fn get(&self, name: &str) -> Option<f64> {
+        match self {
+            UnitCov::Point(p) => p.get(name),
+            UnitCov::Count(c) => c.get(name),
+        }
+    }
+}
+
 /// Residual units of the held-out set, per observable.
 struct Residuals {
     /// (recording index into the pooled list, point covariates, residual, weight).
-    points: BTreeMap<ExtensionObservable, Vec<(usize, murk_types::PointCovariates, f64, f64)>>,
+    points: BTreeMap<ExtensionObservable, Vec<(usize, UnitCov, f64, f64)>>,
     /// Per recording (pooled order): recording-level residual per observable.
     scans: BTreeMap<ExtensionObservable, Vec<Option<f64>>>,
 }
@@ -394,7 +413,7 @@ fn residuals(loaded: &Loaded, evals: &[RecEval]) -> Residuals {
         let sv = points.entry(Survival).or_default();
         let (mut s, mut w) = (0.0, 0.0);
         for (u, (r, wt)) in rec.units.iter().zip(e.survival_residuals(rec)) {
-            sv.push((i, cell(u.cell), r, wt));
+            sv.push((i, UnitCov::Point(cell(u.cell)), r, wt));
             s += r * wt;
             w += wt;
         }
@@ -408,12 +427,16 @@ fn residuals(loaded: &Loaded, evals: &[RecEval]) -> Residuals {
         ] {
             let v = points.entry(obs).or_default();
             for (k, r) in rec.kept.iter().zip(res) {
-                v.push((i, cell(k.cell), *r, 1.0));
+                v.push((i, UnitCov::Point(cell(k.cell)), *r, 1.0));
             }
             let m = (!res.is_empty()).then(|| res.iter().sum::<f64>() / res.len() as f64);
             scans.entry(obs).or_default().push(m);
         }
         scans.entry(Count).or_default().push(e.count_residual(rec));
+        let cv = points.entry(Count).or_default();
+        for u in e.count_bin_residuals(loaded, rec) {
+            cv.push((i, UnitCov::Count(u.cov), u.residual, u.weight));
+        }
     }
     Residuals { points, scans }
 }
@@ -585,11 +608,12 @@ impl DiagnoseValidParams {
             Some(m) if !sw.steps.is_empty() => {
                 let mut gains: Vec<Gain> = Vec::new();
                 for s in &sw.steps {
-                    let (metric, before) = baseline_metrics.of_observable(s.observable);
+                    let point = POINT_COVARIATES.contains(&s.covariate.as_str());
+                    let (metric, before) = baseline_metrics.of_test(s.observable, point);
                     if gains.iter().any(|g| g.metric == metric) {
                         continue;
                     }
-                    let (_, after) = m.of_observable(s.observable);
+                    let (_, after) = m.of_test(s.observable, point);
                     gains.extend(relative_gain(metric, before, after));
                 }
                 let extensions = sw
@@ -841,7 +865,13 @@ impl DiagnoseValidParams {
             ExtensionObservable::Range,
             ExtensionObservable::Intensity,
         ] {
-            if obs != ExtensionObservable::Count {
+            if obs == ExtensionObservable::Count {
+                // Counts per laser and azimuth sector: the rays the
+                // near-range returns fall on.
+                for c in murk_types::COUNT_RAY_COVARIATES {
+                    specs.push((obs, c.to_string(), true));
+                }
+            } else {
                 for c in POINT_COVARIATES {
                     specs.push((obs, c.to_string(), true));
                 }
@@ -1014,9 +1044,15 @@ impl DiagnoseValidParams {
         let scan_of = |r: usize| &loaded.recs[evals[r].rec].scan;
         let b_scan = |r: usize| prof(scan_of(r).get(&b.covariate).and_then(|v| b.binning.of(v)));
         match res.points.get(&a.observable) {
-            Some(pts) if a.point_level || b.point_level => {
+            // A scan-level count test keeps the recording's own count
+            // residual: a point-level count profile is centred per
+            // recording, so removing it leaves that residual as it is.
+            Some(pts)
+                if a.point_level
+                    || (b.point_level && a.observable != ExtensionObservable::Count) =>
+            {
                 // Point residuals with b removed.
-                let adj: Vec<(usize, murk_types::PointCovariates, f64, f64)> = pts
+                let adj: Vec<(usize, UnitCov, f64, f64)> = pts
                     .iter()
                     .map(|(r, pc, e, w)| {
                         let off = if b.point_level {

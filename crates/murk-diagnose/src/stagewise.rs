@@ -47,6 +47,25 @@ use murk_fit::FitValidParams;
 /// Candidates of one observable fitted and compared per step.
 pub const CANDIDATES_PER_STEP: usize = 3;
 
+/// The loss of one held-out recording on `obs` along a covariate of
+/// `point_level`: mean log loss per expected return (survival), mean square
+/// residual of kept returns (range, intensity), |log count ratio| (count
+/// along a scan-level covariate) or its weighted mean per laser and azimuth
+/// sector (count along a point-level one,
+/// [`crate::evaluate::count_bin_loss`]). `None` without data.
+pub fn recording_loss_of(
+    loaded: &Loaded,
+    e: &RecEval,
+    obs: ExtensionObservable,
+    point_level: bool,
+) -> Option<f64> {
+    if obs == ExtensionObservable::Count && point_level {
+        let rec = &loaded.recs[e.rec];
+        return crate::evaluate::count_bin_loss(&e.count_bin_residuals(loaded, rec));
+    }
+    recording_loss(loaded, e, obs)
+}
+
 /// The loss of one held-out recording on `obs`: mean log loss per expected
 /// return (survival), mean square residual of kept returns (range,
 /// intensity), |log count ratio| (count). `None` without data.
@@ -118,6 +137,9 @@ pub(crate) fn term_text(obs: ExtensionObservable, covariate: &str, bins: usize) 
         "{} × f({covariate}) — piecewise constant over {bins} bins, fitted per fold on the fit set",
         match obs {
             ExtensionObservable::Survival => "vanishing distance",
+            ExtensionObservable::Count if murk_types::COUNT_RAY_COVARIATES.contains(&covariate) => {
+                "density of ghost and ring returns on the rays"
+            }
             ExtensionObservable::Count => "expected ghost and ring count",
             ExtensionObservable::Range => "range of kept returns +",
             ExtensionObservable::Intensity => "reflectivity of kept returns",
@@ -345,6 +367,7 @@ impl DiagnoseValidParams {
                 for e in held.iter_mut() {
                     if let Some(old) = evals.iter().find(|o| o.rec == e.rec) {
                         e.near_sim = old.near_sim;
+                        e.near_bins_sim = old.near_bins_sim.clone();
                         e.scene = old.scene;
                     }
                 }
@@ -360,7 +383,10 @@ impl DiagnoseValidParams {
             .iter()
             .zip(&new_evals)
             .filter_map(|(a, b)| {
-                Some(recording_loss(loaded, a, obs)? - recording_loss(loaded, b, obs)?)
+                Some(
+                    recording_loss_of(loaded, a, obs, t.point_level)?
+                        - recording_loss_of(loaded, b, obs, t.point_level)?,
+                )
             })
             .collect();
         let seed = seed_of(
@@ -369,8 +395,8 @@ impl DiagnoseValidParams {
             &["paired", obs.name(), &t.covariate, &round.to_string()],
         );
         let p_value = paired_gain_test(&d, p.permutations, seed);
-        let (metric, before) = Metrics::of(loaded, evals).of_observable(obs);
-        let (_, after) = Metrics::of(loaded, &new_evals).of_observable(obs);
+        let (metric, before) = Metrics::of(loaded, evals).of_test(obs, t.point_level);
+        let (_, after) = Metrics::of(loaded, &new_evals).of_test(obs, t.point_level);
         Ok(Candidate {
             tables: new_tables,
             evals: new_evals,
