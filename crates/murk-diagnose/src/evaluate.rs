@@ -100,6 +100,8 @@ impl RecEval {
             cov,
             residual: ((obs + 0.5) / (s + 0.5)).ln(),
             weight: s + 0.5,
+            observed: obs,
+            simulated: s,
         };
         let mut out = Vec::with_capacity(sim.ring.len() + sim.sector.len() + sim.range.len());
         for (r, (&obs, &s)) in o.ring.iter().zip(&sim.ring).enumerate() {
@@ -161,15 +163,24 @@ pub struct CountUnit {
     pub residual: f64,
     /// `n_sim + ½`.
     pub weight: f64,
+    /// `n_obs`: returns measured.
+    pub observed: f64,
+    /// `n_sim`: returns simulated (mean over the simulations).
+    pub simulated: f64,
 }
 
-/// The per-recording point-level count loss: the weighted mean of
-/// |[`CountUnit::residual`]| over the lasers and azimuth sectors (`None`
-/// without simulations).
-pub fn count_bin_loss(units: &[CountUnit]) -> Option<f64> {
-    let (s, w) = units.iter().fold((0.0, 0.0), |(s, w), u| {
-        (s + u.weight * u.residual.abs(), w + u.weight)
-    });
+/// The per-recording point-level count loss along `covariate`: the
+/// weighted mean of |[`CountUnit::residual`]| over the units that carry it
+/// (the lasers for `ring` and `elevation`, the azimuth sectors for
+/// `azimuth`; `None` without simulations). Each axis is judged on its own
+/// units, so a misfit along another axis does not mask a term's gain.
+pub fn count_bin_loss(units: &[CountUnit], covariate: &str) -> Option<f64> {
+    let (s, w) = units
+        .iter()
+        .filter(|u| u.cov.get(covariate).is_some())
+        .fold((0.0, 0.0), |(s, w), u| {
+            (s + u.weight * u.residual.abs(), w + u.weight)
+        });
     (w > 0.0).then(|| s / w)
 }
 
@@ -393,9 +404,11 @@ pub struct Metrics {
     /// ring counts.
     pub count_abs_log_error: Option<f64>,
     /// Mean over recordings of the ghost and ring counts' weighted mean
-    /// |ln((n_obs + ½)/(n_sim + ½))| per laser and azimuth sector
-    /// ([`count_bin_loss`]): where the returns fall, not only how many.
-    pub count_bin_abs_log_error: Option<f64>,
+    /// |ln((n_obs + ½)/(n_sim + ½))| per laser ([`count_bin_loss`]): how
+    /// they fall over the lasers, not only how many there are.
+    pub count_laser_abs_log_error: Option<f64>,
+    /// The same per azimuth sector.
+    pub count_sector_abs_log_error: Option<f64>,
     /// Mean range residual of kept returns, metres.
     pub range_bias_m: f64,
     /// RMS range residual of kept returns, metres.
@@ -422,7 +435,7 @@ impl Metrics {
         let mut ncr = 0.0;
         let (mut rs, mut rs2, mut is, mut is2, mut nk) = (0.0f64, 0.0f64, 0.0f64, 0.0f64, 0.0f64);
         let mut count = Vec::new();
-        let mut count_bins = Vec::new();
+        let (mut count_lasers, mut count_sectors) = (Vec::new(), Vec::new());
         let mut scenes = Vec::new();
         for e in evals {
             let rec = &loaded.recs[e.rec];
@@ -449,9 +462,9 @@ impl Metrics {
             if let Some(c) = e.count_residual(rec) {
                 count.push(c.abs());
             }
-            if let Some(c) = count_bin_loss(&e.count_bin_residuals(loaded, rec)) {
-                count_bins.push(c);
-            }
+            let units = e.count_bin_residuals(loaded, rec);
+            count_lasers.extend(count_bin_loss(&units, "ring"));
+            count_sectors.extend(count_bin_loss(&units, "azimuth"));
             if let Some(s) = e.scene {
                 scenes.push(s);
             }
@@ -463,7 +476,8 @@ impl Metrics {
             survival_log_loss: ll / trials.max(1.0),
             no_change_rate_error: ncr / n,
             count_abs_log_error: mean(count),
-            count_bin_abs_log_error: mean(count_bins),
+            count_laser_abs_log_error: mean(count_lasers),
+            count_sector_abs_log_error: mean(count_sectors),
             range_bias_m: rs / nk.max(1.0),
             range_rmse_m: (rs2 / nk.max(1.0)).sqrt(),
             intensity_bias: is / nk.max(1.0),
@@ -488,17 +502,23 @@ impl Metrics {
         }
     }
 
-    /// The metric that measures `observable` along a covariate of `level`
-    /// (point-level counts: [`Metrics::count_bin_abs_log_error`]).
+    /// The metric that measures `observable` along `covariate` (counts
+    /// along the lasers or azimuth: [`Metrics::count_laser_abs_log_error`],
+    /// [`Metrics::count_sector_abs_log_error`]).
     pub fn of_test(
         &self,
         obs: ExtensionObservable,
-        point_level: bool,
+        covariate: &str,
     ) -> (&'static str, Option<f64>) {
-        if obs == ExtensionObservable::Count && point_level {
-            ("count_bin_abs_log_error", self.count_bin_abs_log_error)
-        } else {
-            self.of_observable(obs)
+        match (obs, covariate) {
+            (ExtensionObservable::Count, "ring" | "elevation") => {
+                ("count_laser_abs_log_error", self.count_laser_abs_log_error)
+            }
+            (ExtensionObservable::Count, "azimuth") => (
+                "count_sector_abs_log_error",
+                self.count_sector_abs_log_error,
+            ),
+            _ => self.of_observable(obs),
         }
     }
 

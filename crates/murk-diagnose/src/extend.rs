@@ -12,8 +12,8 @@
 //! - `intensity`: `exp` of the mean log ratio of measured to reference
 //!   reflectivity;
 //! - `count`: `Σ(N_obs + ½) / Σ(N_sim + ½)` over the bin's recordings; along
-//!   `ring`, `elevation` or `azimuth`, over the bin's lasers or azimuth
-//!   sectors in every recording (a factor on the density of the near-range
+//!   `ring`, `elevation` or `azimuth`, `(Σn_obs + ½)/(Σn_sim + ½)` over the
+//!   bin's lasers or azimuth sectors in every recording (a factor on the density of the near-range
 //!   returns on those rays).
 //!
 //! Every term is fitted on top of the terms the table already has (the
@@ -181,8 +181,9 @@ pub fn fit_term_with_edge(
             (v, pooled)
         }
         ExtensionObservable::Count if murk_types::COUNT_RAY_COVARIATES.contains(&covariate) => {
-            // Per bin of lasers (or azimuth sectors): Σ(n_obs + ½)/Σ(n_sim + ½)
-            // over the fit set's recordings and the bin's units, the factor
+            // Per bin of lasers (or azimuth sectors): (Σn_obs + ½)/(Σn_sim + ½)
+            // over the fit set's recordings and the bin's units (a pseudo
+            // count per unit would pull sparse bins to 1), the factor
             // on the density of the returns on those rays
             // (`murk_types::RayDensity`, which `murk apply` places by).
             let mut s = vec![(0.0f64, 0.0f64); nb];
@@ -192,14 +193,16 @@ pub fn fit_term_with_edge(
                     let Some(b) = u.cov.get(covariate).and_then(|x| binning.of_number(x)) else {
                         continue;
                     };
-                    // n_obs + ½ back from the residual and the weight.
-                    s[b].0 += u.weight * u.residual.exp();
-                    s[b].1 += u.weight;
+                    s[b].0 += u.observed;
+                    s[b].1 += u.simulated;
                 }
             }
             let tot = s.iter().fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
-            let pooled = if tot.1 > 0.0 { tot.0 / tot.1 } else { 1.0 };
-            let v = s.iter().map(|&(o, x)| (x > 0.0).then(|| o / x)).collect();
+            let pooled = (tot.0 + 0.5) / (tot.1 + 0.5);
+            let v = s
+                .iter()
+                .map(|&(o, x)| (x > 0.0).then(|| (o + 0.5) / (x + 0.5)))
+                .collect();
             (v, pooled)
         }
         ExtensionObservable::Count => {

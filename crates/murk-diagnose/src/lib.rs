@@ -608,12 +608,11 @@ impl DiagnoseValidParams {
             Some(m) if !sw.steps.is_empty() => {
                 let mut gains: Vec<Gain> = Vec::new();
                 for s in &sw.steps {
-                    let point = POINT_COVARIATES.contains(&s.covariate.as_str());
-                    let (metric, before) = baseline_metrics.of_test(s.observable, point);
+                    let (metric, before) = baseline_metrics.of_test(s.observable, &s.covariate);
                     if gains.iter().any(|g| g.metric == metric) {
                         continue;
                     }
-                    let (_, after) = m.of_test(s.observable, point);
+                    let (_, after) = m.of_test(s.observable, &s.covariate);
                     gains.extend(relative_gain(metric, before, after));
                 }
                 let extensions = sw

@@ -47,21 +47,21 @@ use murk_fit::FitValidParams;
 /// Candidates of one observable fitted and compared per step.
 pub const CANDIDATES_PER_STEP: usize = 3;
 
-/// The loss of one held-out recording on `obs` along a covariate of
-/// `point_level`: mean log loss per expected return (survival), mean square
-/// residual of kept returns (range, intensity), |log count ratio| (count
-/// along a scan-level covariate) or its weighted mean per laser and azimuth
-/// sector (count along a point-level one,
-/// [`crate::evaluate::count_bin_loss`]). `None` without data.
+/// The loss of one held-out recording on `obs` along `covariate`: mean log
+/// loss per expected return (survival), mean square residual of kept
+/// returns (range, intensity), |log count ratio| (count along a scan-level
+/// covariate) or its weighted mean per laser or azimuth sector (count along
+/// `ring`, `elevation` or `azimuth`, [`crate::evaluate::count_bin_loss`]).
+/// `None` without data.
 pub fn recording_loss_of(
     loaded: &Loaded,
     e: &RecEval,
     obs: ExtensionObservable,
-    point_level: bool,
+    covariate: &str,
 ) -> Option<f64> {
-    if obs == ExtensionObservable::Count && point_level {
+    if obs == ExtensionObservable::Count && murk_types::COUNT_RAY_COVARIATES.contains(&covariate) {
         let rec = &loaded.recs[e.rec];
-        return crate::evaluate::count_bin_loss(&e.count_bin_residuals(loaded, rec));
+        return crate::evaluate::count_bin_loss(&e.count_bin_residuals(loaded, rec), covariate);
     }
     recording_loss(loaded, e, obs)
 }
@@ -384,8 +384,8 @@ impl DiagnoseValidParams {
             .zip(&new_evals)
             .filter_map(|(a, b)| {
                 Some(
-                    recording_loss_of(loaded, a, obs, t.point_level)?
-                        - recording_loss_of(loaded, b, obs, t.point_level)?,
+                    recording_loss_of(loaded, a, obs, &t.covariate)?
+                        - recording_loss_of(loaded, b, obs, &t.covariate)?,
                 )
             })
             .collect();
@@ -395,8 +395,8 @@ impl DiagnoseValidParams {
             &["paired", obs.name(), &t.covariate, &round.to_string()],
         );
         let p_value = paired_gain_test(&d, p.permutations, seed);
-        let (metric, before) = Metrics::of(loaded, evals).of_test(obs, t.point_level);
-        let (_, after) = Metrics::of(loaded, &new_evals).of_test(obs, t.point_level);
+        let (metric, before) = Metrics::of(loaded, evals).of_test(obs, &t.covariate);
+        let (_, after) = Metrics::of(loaded, &new_evals).of_test(obs, &t.covariate);
         Ok(Candidate {
             tables: new_tables,
             evals: new_evals,
