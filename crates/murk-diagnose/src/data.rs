@@ -145,6 +145,11 @@ impl NearHistogram {
         (k as f64 + 0.5) * 360.0 / AZIMUTH_SECTORS as f64
     }
 
+    /// Centre of range bin `k`, metres.
+    pub fn range_centre(k: usize) -> f64 {
+        (k as f64 + 0.5) * RANGE_BIN_M
+    }
+
     /// The range bin of a range in metres.
     pub fn range_bin_of(range_m: f64) -> usize {
         ((range_m.max(0.0) / RANGE_BIN_M) as usize).min(RANGE_BINS - 1)
@@ -505,4 +510,30 @@ pub fn load(
         inputs,
         skipped,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn histogram_bins_and_means() {
+        assert_eq!(NearHistogram::sector_of(0.0), 0);
+        assert_eq!(NearHistogram::sector_of(29.999), 0);
+        assert_eq!(NearHistogram::sector_of(30.0), 1);
+        assert_eq!(NearHistogram::sector_of(-1.0), AZIMUTH_SECTORS - 1);
+        assert_eq!(NearHistogram::sector_of(360.0), 0);
+        assert_eq!(NearHistogram::sector_centre(0), 15.0);
+        assert_eq!(NearHistogram::range_bin_of(2.5), 2);
+        assert_eq!(NearHistogram::range_bin_of(99.0), RANGE_BINS - 1);
+        let mut a = NearHistogram {
+            ring: vec![2.0, 4.0],
+            ..NearHistogram::default()
+        };
+        a.sector[3] = 6.0;
+        let mut m = NearHistogram::default();
+        m.add_scaled(&a, 0.5);
+        m.add_scaled(&a, 0.5);
+        assert_eq!(m, a);
+    }
 }

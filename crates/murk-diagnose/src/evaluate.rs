@@ -89,7 +89,8 @@ impl RecEval {
     }
 
     /// The point-level count residuals: per laser, azimuth sector and range
-    /// bin of the ghost and ring returns, `ln((n_obs + ½)/(n_sim + ½))`
+    /// bin (those with a return measured or simulated) of the ghost and ring
+    /// returns, `ln((n_obs + ½)/(n_sim + ½))`
     /// with weight `n_sim + ½` (empty without simulations).
     pub fn count_bin_residuals(&self, loaded: &Loaded, rec: &Rec) -> Vec<CountUnit> {
         let Some(sim) = &self.near_bins_sim else {
@@ -126,12 +127,25 @@ impl RecEval {
                 },
             ));
         }
+        // Range bins outside the ring and ghost windows hold nothing.
+        for (k, (&obs, &s)) in o.range.iter().zip(&sim.range).enumerate() {
+            if obs + s > 0.0 {
+                out.push(unit(
+                    obs,
+                    s,
+                    CountCovariates {
+                        range: Some(NearHistogram::range_centre(k)),
+                        ..CountCovariates::default()
+                    },
+                ));
+            }
+        }
         out
     }
 }
 
-/// The covariates of one point-level count unit (a laser, or an azimuth
-/// sector): the names it does not carry are `None`.
+/// The covariates of one point-level count unit (a laser, an azimuth
+/// sector or a range bin): the names it does not carry are `None`.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct CountCovariates {
     /// Laser id.
@@ -140,6 +154,8 @@ pub struct CountCovariates {
     pub elevation: Option<f64>,
     /// Centre of the azimuth sector, degrees.
     pub azimuth: Option<f64>,
+    /// Centre of the range bin of the returns' own range, metres.
+    pub range: Option<f64>,
 }
 
 impl CountCovariates {
@@ -149,6 +165,7 @@ impl CountCovariates {
             "ring" => self.ring,
             "elevation" => self.elevation,
             "azimuth" => self.azimuth,
+            "range" => self.range,
             _ => None,
         }
     }

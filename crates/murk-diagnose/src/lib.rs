@@ -865,9 +865,10 @@ impl DiagnoseValidParams {
             ExtensionObservable::Intensity,
         ] {
             if obs == ExtensionObservable::Count {
-                // Counts per laser and azimuth sector: the rays the
-                // near-range returns fall on.
-                for c in murk_types::COUNT_RAY_COVARIATES {
+                // Counts per laser and azimuth sector (the rays the
+                // near-range returns fall on) and per bin of their own
+                // range.
+                for c in murk_types::COUNT_RAY_COVARIATES.iter().chain(&["range"]) {
                     specs.push((obs, c.to_string(), true));
                 }
             } else {

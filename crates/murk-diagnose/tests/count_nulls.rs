@@ -77,14 +77,14 @@ fn count_mor(d: &Diagnosis, source: &str) -> (String, bool) {
     }
 }
 
-/// The point-level count tests (per laser, elevation, azimuth sector):
-/// their lines, and whether any is flagged or significant.
+/// The point-level count tests (per laser, elevation, azimuth sector,
+/// range bin): their lines, and whether any is flagged or significant.
 fn count_rays(d: &Diagnosis, source: &str) -> (String, bool) {
     let mut line = format!("{source}:");
     let mut any = false;
     for f in d.report.findings.iter().filter(|f| {
         f.observable == ExtensionObservable::Count
-            && murk_types::COUNT_RAY_COVARIATES.contains(&f.covariate.as_str())
+            && murk_types::POINT_COVARIATES.contains(&f.covariate.as_str())
     }) {
         let flagged = (f.p_adjusted < 0.05 && f.strength >= 1.0) || f.significant;
         any |= flagged;
