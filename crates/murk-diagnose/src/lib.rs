@@ -96,6 +96,28 @@
 //! the edge that the term re-fits. The detection-power table above predates
 //! the stagewise extension.
 //!
+//! **Counts along the rays** (issue #13 item 3; measured 2026-12-03 with
+//! `tests/point_counts.rs`, 56 recordings of which about 40 in the weather;
+//! test profile). Hidden effect: the weather's ghost and ring returns three
+//! times as dense on the downward beams (elevation < 0°). Found = count ×
+//! elevation significant with count × ring `explained_by` it; the term's
+//! density ratio of downward to upward lasers against the truth 3.
+//!
+//! | source | seeds | found | false | step gain (`count_laser_abs_log_error`) | density ratio |
+//! |---|---|---|---|---|---|
+//! | generated fog | 61–63 | 3/3 | 0 | +33.9 to +37.6 % (p 0.0005) | 2.76–3.14 |
+//! | generated rain | 64–66 | 3/3 | 0 | +13.6 to +15.2 % (p ≤ 0.002) | 2.69–3.44 |
+//! | semi-real fog | 67 | 1/1 | count × timestamp and × range, both flagged without the effect too | +19.6 % (p 0.0005) | – |
+//! | generated nulls (fog 41–43, rain 44) | – | – | 0 | none | – |
+//!
+//! The semi-real source places weather returns only on firings that
+//! returned, the model on every ray: on its null campaigns count × azimuth
+//! is flagged at seed 45 (strength 1.9) and not at seed 67, count × range
+//! at both (3.4, 3.2). A count along
+//! the returns' own range is tested and reported but never extended: a
+//! term would reshape the near-range distance law, and the seed-004
+//! per-echo family (F_j(x) · F_l(φ)) is not built.
+//!
 //! **Architecture invariant:** the diagnosis reads measured data through
 //! murk-fit's pairing and simulates through murk-infer's applier, so what it
 //! measures is what those tools do; it never re-implements either model.
