@@ -358,6 +358,7 @@ impl Applier {
             ring: laws.1,
             lidar: self.lidar.as_ref(),
             azimuth_resolution_deg: self.azimuth_resolution_deg,
+            density: murk_types::RayDensity::new(&self.extensions),
         };
         let (g, r) = add_near_range(
             cloud,

@@ -15,7 +15,9 @@
 //!    by the product of the intensity terms (stored back in the input's
 //!    scale);
 //! 4. **count**: the expected ghost and ring counts are multiplied by the
-//!    product of the count terms (scan-level only).
+//!    product of the scan-level count terms; the point-level ones (along
+//!    `ring`, `elevation`, `azimuth`) choose the rays the returns fall on
+//!    (`near`, [`murk_types::RayDensity`]).
 //!
 //! Draws are seeded per fixed-size chunk by (seed, scan key), so outputs do
 //! not depend on the thread count.

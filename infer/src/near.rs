@@ -6,7 +6,11 @@
 //! table's expected count at the MOR; each return draws its range and
 //! calibrated reflectivity from the table's (truncated) Gaussian laws and a
 //! ray: a ring drawn uniformly among the rings the input scan has, and an
-//! azimuth drawn uniformly on the sensor's azimuth grid. Then, on that ray:
+//! azimuth drawn uniformly on the sensor's azimuth grid. With count terms
+//! along `ring`, `elevation` or `azimuth` (from `murk diagnose`) the rings
+//! and azimuths are drawn in proportion to the terms' values and the
+//! expected counts scale with their means ([`murk_types::RayDensity`]).
+//! Then, on that ray:
 //!
 //! - if the ray has returns (after vanishing), one of them is the return of
 //!   the firing the soft target interrupts (drawn uniformly: an accumulated
@@ -25,7 +29,7 @@
 
 use std::collections::HashMap;
 
-use murk_types::{LidarSpec, PointCloud};
+use murk_types::{LidarSpec, PointCloud, RayDensity};
 use rand::RngExt;
 use rand::rngs::ChaCha8Rng;
 use rand_distr::{Distribution, Poisson};
@@ -83,6 +87,9 @@ pub(crate) struct NearSettings<'a> {
     pub ring: Option<&'a NearLaw>,
     pub lidar: Option<&'a LidarSpec>,
     pub azimuth_resolution_deg: f64,
+    /// Where the returns fall over the rays (the table's point-level count
+    /// terms; uniform without them).
+    pub density: RayDensity,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -157,10 +164,6 @@ pub(crate) fn add_near_range(
     warnings: &mut Vec<String>,
     replaced: &mut Vec<usize>,
 ) -> Result<(Option<NearRangeCounts>, Option<NearRangeCounts>), InferError> {
-    let mut rng = seed.rng(Purpose::NearRange, 0);
-    let n_ghost = s.ghost.map_or(0, |l| poisson(&mut rng, l.expected));
-    let n_ring = s.ring.map_or(0, |l| poisson(&mut rng, l.expected));
-
     let mut rings = present_rings(input);
     if let Some(spec) = s.lidar {
         if let Some(&bad) = rings.iter().find(|&&r| r as usize >= spec.rings()) {
@@ -179,6 +182,45 @@ pub(crate) fn add_near_range(
 
     let res = s.azimuth_resolution_deg;
     let bins = ((360.0 / res).round() as u64).max(1);
+    // Point-level count terms: cumulative weights of the rings and azimuth
+    // bins, and the factor on the expected counts.
+    let (ring_cdf, bin_cdf, total) = if s.density.is_uniform() {
+        (None, None, 1.0)
+    } else {
+        let g = if s.density.has_beam_terms() && !rings.is_empty() {
+            let elevation: Vec<f64> = match s.lidar {
+                Some(spec) => rings
+                    .iter()
+                    .map(|&r| spec.elevation_deg.get(r as usize).copied().unwrap_or(0.0))
+                    .collect(),
+                None => {
+                    let max = *rings.last().unwrap_or(&0) as usize;
+                    let mut needs = vec![false; max + 1];
+                    for &r in &rings {
+                        needs[r as usize] = true;
+                    }
+                    let el = measured_elevation(input, &needs);
+                    rings.iter().map(|&r| el[r as usize].to_degrees()).collect()
+                }
+            };
+            let with: Vec<(u16, f64)> = rings.iter().copied().zip(elevation).collect();
+            s.density.ring_weights(&with)
+        } else {
+            Vec::new()
+        };
+        let h = if s.density.has_azimuth_terms() {
+            let az: Vec<f64> = (0..bins).map(|b| b as f64 * res).collect();
+            s.density.azimuth_weights(&az)
+        } else {
+            Vec::new()
+        };
+        let total = s.density.total_factor(&g, &h);
+        (cumulative(&g), cumulative(&h), total)
+    };
+    let mut rng = seed.rng(Purpose::NearRange, 0);
+    let expected = |l: &NearLaw| l.expected * total;
+    let n_ghost = s.ghost.map_or(0, |l| poisson(&mut rng, expected(l)));
+    let n_ring = s.ring.map_or(0, |l| poisson(&mut rng, expected(l)));
     let (tmin, tmax) = match &input.time {
         Some(t) if !t.is_empty() => t
             .par_iter()
@@ -198,13 +240,18 @@ pub(crate) fn add_near_range(
         let Some(law) = law else { continue };
         for _ in 0..n {
             let ring_u: f64 = rng.random();
-            let bin = rng.random_range(0..bins);
+            let bin = match &bin_cdf {
+                None => rng.random_range(0..bins),
+                Some(c) => pick_index(c, rng.random()) as u64,
+            };
             let distance = law.distance.sample(&mut rng);
             let reflectivity = law.reflectivity.sample(&mut rng);
             let pick: f64 = rng.random();
             let time_u: f64 = rng.random();
             let ring = if rings.is_empty() {
                 u16::MAX
+            } else if let Some(c) = &ring_cdf {
+                rings[pick_index(c, ring_u)]
             } else {
                 rings[((ring_u * rings.len() as f64) as usize).min(rings.len() - 1)]
             };
@@ -237,7 +284,7 @@ pub(crate) fn add_near_range(
     let tally = |law: Option<&NearLaw>, ghost: bool| {
         law.map(|l| {
             let mut c = NearRangeCounts {
-                expected: l.expected,
+                expected: expected(l),
                 count_source: l.count_source,
                 ..NearRangeCounts::default()
             };
@@ -257,6 +304,29 @@ pub(crate) fn add_near_range(
         })
     };
     Ok((tally(s.ghost, true), tally(s.ring, false)))
+}
+
+/// Normalised cumulative sums of `w` (`None` when empty or all zero: the
+/// draw is then uniform).
+fn cumulative(w: &[f64]) -> Option<Vec<f64>> {
+    let total: f64 = w.iter().sum();
+    if w.is_empty() || !(total > 0.0 && total.is_finite()) {
+        return None;
+    }
+    let mut acc = 0.0;
+    Some(
+        w.iter()
+            .map(|x| {
+                acc += x;
+                acc / total
+            })
+            .collect(),
+    )
+}
+
+/// The index whose cumulative share first exceeds `u` in `[0, 1)`.
+fn pick_index(cdf: &[f64], u: f64) -> usize {
+    cdf.partition_point(|&c| c <= u).min(cdf.len() - 1)
 }
 
 /// Matches events to the returns of their rays and applies them.

@@ -2,6 +2,8 @@
 //! answers per observable, the baseline when turned off, and the same bytes
 //! whatever the thread count.
 
+mod common;
+
 use std::collections::BTreeMap;
 
 use murk_infer::{ApplyParams, CoefficientTable, PointCloud, Severity};
@@ -239,4 +241,94 @@ fn several_terms_on_one_observable_combine() {
         .build(&t3)
         .unwrap();
     assert!(windy3.apply(&scan, "s").unwrap().0.is_empty());
+}
+
+#[test]
+fn count_terms_along_the_beams_place_ghosts_by_their_density() {
+    // Hand-built known answer: ghost and ring returns three times as dense
+    // on the downward lasers (8 of the VLP-16's 16), twice as dense in the
+    // half-turn 0–180°. Expected per scan: (41 + 12) × mean density
+    // (3·8 + 8)/16 × (2 + 1)/2 = 53 × 2 × 1.5 = 159; on an empty scene each
+    // return is added on its ray, so the output shows the densities.
+    let mut t = common::seed_table();
+    t.weathers.get_mut(&WeatherClass::Fog).unwrap().extensions = vec![
+        term(
+            ExtensionObservable::Count,
+            "elevation",
+            vec![0.0],
+            vec![3.0, 1.0],
+        ),
+        term(
+            ExtensionObservable::Count,
+            "azimuth",
+            vec![180.0],
+            vec![2.0, 1.0],
+        ),
+    ];
+    t.validate().unwrap();
+    let spec = murk_types::LidarSpec::vlp16();
+    // One far return per laser, so that every ring is present.
+    let mut scan = PointCloud::with_capacity(16);
+    for ring in 0..16u16 {
+        let el = spec.elevation_deg[ring as usize].to_radians();
+        scan.push(
+            (300.0 * el.cos()) as f32,
+            0.0,
+            (300.0 * el.sin()) as f32,
+            50.0,
+            ring,
+        );
+    }
+    let ap = ApplyParams::new(WeatherClass::Fog, Severity::Mor(60.0))
+        .near_range(true)
+        .lidar(spec.clone())
+        .build(&t)
+        .unwrap();
+    let (mut down, mut up, mut first_half, mut second_half) = (0usize, 0usize, 0usize, 0usize);
+    let mut expected = 0.0;
+    let scans = 300;
+    for k in 0..scans {
+        let (out, summary) = ap.apply(&scan, &format!("s{k}")).unwrap();
+        expected +=
+            summary.ghost.as_ref().unwrap().expected + summary.ring.as_ref().unwrap().expected;
+        for i in 0..out.len() {
+            let (x, y, z) = (out.x[i] as f64, out.y[i] as f64, out.z[i] as f64);
+            if (x * x + y * y + z * z).sqrt() > 20.0 {
+                continue;
+            }
+            if spec.elevation_deg[out.ring[i] as usize] < 0.0 {
+                down += 1;
+            } else {
+                up += 1;
+            }
+            let az = y.atan2(x).to_degrees().rem_euclid(360.0);
+            if az < 180.0 {
+                first_half += 1;
+            } else {
+                second_half += 1;
+            }
+        }
+    }
+    assert!((expected / scans as f64 - 159.0).abs() < 1e-9, "{expected}");
+    let n = (down + up) as f64 / scans as f64;
+    assert!((n / 159.0 - 1.0).abs() < 0.03, "{n} per scan");
+    // Truth 3 and 2; ~48 000 returns put the bounds at about 4 standard
+    // errors.
+    let beams = down as f64 / up as f64;
+    let halves = first_half as f64 / second_half as f64;
+    assert!((beams - 3.0).abs() < 0.12, "down/up {beams}");
+    assert!((halves - 2.0).abs() < 0.08, "0–180°/180–360° {halves}");
+    // Without the terms the placement is uniform over the rays.
+    let base = ApplyParams::new(WeatherClass::Fog, Severity::Mor(60.0))
+        .near_range(true)
+        .lidar(spec)
+        .extensions(false)
+        .build(&t)
+        .unwrap();
+    let (out, summary) = base.apply(&scan, "s0").unwrap();
+    assert_eq!(
+        summary.ghost.unwrap().expected + summary.ring.unwrap().expected,
+        53.0
+    );
+    assert!(out.len() > 16);
 }

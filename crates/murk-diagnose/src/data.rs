@@ -5,7 +5,8 @@
 //! exactly the classes the fit saw: per reference cell, how many of its
 //! expected returns were kept (*no change*); for each kept return, its
 //! measured range and reflectivity; per recording, the number of ghost and
-//! ring returns. Cells whose clear return is hidden behind a nearer weather
+//! ring returns, also per laser, azimuth sector and range bin
+//! ([`NearHistogram`]). Cells whose clear return is hidden behind a nearer weather
 //! return (their fate is unknown) are left out of the survival units, as the
 //! fit leaves them out.
 
@@ -84,8 +85,91 @@ pub struct Rec {
     pub kept: Vec<Kept>,
     /// Ghost and ring returns measured.
     pub near: u64,
+    /// The same returns by laser, azimuth sector and range bin.
+    pub near_bins: NearHistogram,
     /// Index of the nearest clear recording in time (into `Loaded::clear`).
     pub clear: usize,
+}
+
+/// Azimuth sectors of a [`NearHistogram`] (30° each, the first from 0°).
+pub const AZIMUTH_SECTORS: usize = 12;
+/// Range bins of a [`NearHistogram`], [`RANGE_BIN_M`] wide from 0 m (the
+/// last one open above).
+pub const RANGE_BINS: usize = 12;
+/// Width of a range bin, metres.
+pub const RANGE_BIN_M: f64 = 1.0;
+
+/// The ghost and ring returns of one recording (measured, or the mean of its
+/// simulations) counted per laser, per azimuth sector and per range bin: a
+/// fixed-size summary (three marginal histograms), not the points. The
+/// laser and azimuth are those of the return's cell, the range its own.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct NearHistogram {
+    /// Per ring (laser id), one entry per ring of the grid.
+    pub ring: Vec<f64>,
+    /// Per azimuth sector ([`AZIMUTH_SECTORS`]).
+    pub sector: [f64; AZIMUTH_SECTORS],
+    /// Per range bin ([`RANGE_BINS`]).
+    pub range: [f64; RANGE_BINS],
+}
+
+impl NearHistogram {
+    /// Counts the ghost and ring returns of a pairing tally on `grid`.
+    pub fn of_tally(tally: &murk_fit::observe::RecordingTally, grid: &CellGrid) -> NearHistogram {
+        let mut h = NearHistogram {
+            ring: vec![0.0; grid.rings()],
+            ..NearHistogram::default()
+        };
+        // `occluded` holds the cells of the ghost and ring returns.
+        for &c in &tally.occluded {
+            let c = c as usize;
+            if let Some(x) = h.ring.get_mut(grid.ring_of(c)) {
+                *x += 1.0;
+            }
+            h.sector[Self::sector_of(grid.azimuth_deg(c))] += 1.0;
+        }
+        for &(r, _) in tally.ghosts.iter().chain(&tally.rings) {
+            h.range[Self::range_bin_of(r as f64)] += 1.0;
+        }
+        h
+    }
+
+    /// The sector of an azimuth in degrees.
+    pub fn sector_of(azimuth_deg: f64) -> usize {
+        let a = azimuth_deg.rem_euclid(360.0);
+        ((a / (360.0 / AZIMUTH_SECTORS as f64)) as usize).min(AZIMUTH_SECTORS - 1)
+    }
+
+    /// Centre of sector `k`, degrees.
+    pub fn sector_centre(k: usize) -> f64 {
+        (k as f64 + 0.5) * 360.0 / AZIMUTH_SECTORS as f64
+    }
+
+    /// Centre of range bin `k`, metres.
+    pub fn range_centre(k: usize) -> f64 {
+        (k as f64 + 0.5) * RANGE_BIN_M
+    }
+
+    /// The range bin of a range in metres.
+    pub fn range_bin_of(range_m: f64) -> usize {
+        ((range_m.max(0.0) / RANGE_BIN_M) as usize).min(RANGE_BINS - 1)
+    }
+
+    /// Adds `o` times `w` (for means over simulations).
+    pub fn add_scaled(&mut self, o: &NearHistogram, w: f64) {
+        if self.ring.len() < o.ring.len() {
+            self.ring.resize(o.ring.len(), 0.0);
+        }
+        for (a, b) in self.ring.iter_mut().zip(&o.ring) {
+            *a += w * b;
+        }
+        for (a, b) in self.sector.iter_mut().zip(&o.sector) {
+            *a += w * b;
+        }
+        for (a, b) in self.range.iter_mut().zip(&o.range) {
+            *a += w * b;
+        }
+    }
 }
 
 /// A clear recording.
@@ -409,6 +493,7 @@ pub fn load(
                 units,
                 kept,
                 near: (tally.ghosts.len() + tally.rings.len()) as u64,
+                near_bins: NearHistogram::of_tally(&tally, &grid),
                 clear: nearest,
             })
         })
@@ -425,4 +510,30 @@ pub fn load(
         inputs,
         skipped,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn histogram_bins_and_means() {
+        assert_eq!(NearHistogram::sector_of(0.0), 0);
+        assert_eq!(NearHistogram::sector_of(29.999), 0);
+        assert_eq!(NearHistogram::sector_of(30.0), 1);
+        assert_eq!(NearHistogram::sector_of(-1.0), AZIMUTH_SECTORS - 1);
+        assert_eq!(NearHistogram::sector_of(360.0), 0);
+        assert_eq!(NearHistogram::sector_centre(0), 15.0);
+        assert_eq!(NearHistogram::range_bin_of(2.5), 2);
+        assert_eq!(NearHistogram::range_bin_of(99.0), RANGE_BINS - 1);
+        let mut a = NearHistogram {
+            ring: vec![2.0, 4.0],
+            ..NearHistogram::default()
+        };
+        a.sector[3] = 6.0;
+        let mut m = NearHistogram::default();
+        m.add_scaled(&a, 0.5);
+        m.add_scaled(&a, 0.5);
+        assert_eq!(m, a);
+    }
 }

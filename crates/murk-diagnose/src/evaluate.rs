@@ -16,7 +16,8 @@
 //! - **count** and the scene: the recording is *simulated* with murk-infer
 //!   from the nearest clear recording (`sims` seeded draws), the simulation
 //!   is classified by the same pairing as the measurement, and its ghost and
-//!   ring returns are counted; the simulated clouds are compared with the
+//!   ring returns are counted, in total and per laser, azimuth sector and
+//!   range bin ([`crate::data::NearHistogram`]); the simulated clouds are compared with the
 //!   measured one by [`crate::scene::SceneMetrics`].
 
 use std::collections::BTreeMap;
@@ -33,7 +34,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::DiagnoseError;
-use crate::data::{Loaded, Rec, log_ratio, read_calibrated};
+use crate::data::{Loaded, NearHistogram, Rec, log_ratio, read_calibrated};
 use crate::scene::{SceneMetrics, VoxelBox};
 
 /// Keep probabilities are clipped into `[P_FLOOR, 1 − P_FLOOR]` for the log
@@ -66,6 +67,8 @@ pub struct RecEval {
     pub intensity_residual: Vec<f64>,
     /// Mean ghost + ring count of the simulations (`None` without them).
     pub near_sim: Option<f64>,
+    /// The same per laser, azimuth sector and range bin.
+    pub near_bins_sim: Option<NearHistogram>,
     /// Mean scene metrics of the simulations.
     pub scene: Option<SceneMetrics>,
 }
@@ -84,6 +87,118 @@ impl RecEval {
         self.near_sim
             .map(|s| ((rec.near as f64 + 1.0) / (s + 1.0)).ln())
     }
+
+    /// The point-level count residuals: per laser, azimuth sector and range
+    /// bin (those with a return measured or simulated) of the ghost and ring
+    /// returns, `ln((n_obs + ½)/(n_sim + ½))`
+    /// with weight `n_sim + ½` (empty without simulations).
+    pub fn count_bin_residuals(&self, loaded: &Loaded, rec: &Rec) -> Vec<CountUnit> {
+        let Some(sim) = &self.near_bins_sim else {
+            return Vec::new();
+        };
+        let o = &rec.near_bins;
+        let unit = |obs: f64, s: f64, cov: CountCovariates| CountUnit {
+            cov,
+            residual: ((obs + 0.5) / (s + 0.5)).ln(),
+            weight: s + 0.5,
+            observed: obs,
+            simulated: s,
+        };
+        let mut out = Vec::with_capacity(sim.ring.len() + sim.sector.len() + sim.range.len());
+        for (r, (&obs, &s)) in o.ring.iter().zip(&sim.ring).enumerate() {
+            let elevation = loaded.spec.elevation_deg.get(r).copied();
+            out.push(unit(
+                obs,
+                s,
+                CountCovariates {
+                    ring: Some(r as f64),
+                    elevation,
+                    ..CountCovariates::default()
+                },
+            ));
+        }
+        for (k, (&obs, &s)) in o.sector.iter().zip(&sim.sector).enumerate() {
+            out.push(unit(
+                obs,
+                s,
+                CountCovariates {
+                    azimuth: Some(NearHistogram::sector_centre(k)),
+                    ..CountCovariates::default()
+                },
+            ));
+        }
+        // Range bins outside the ring and ghost windows hold nothing.
+        for (k, (&obs, &s)) in o.range.iter().zip(&sim.range).enumerate() {
+            if obs + s > 0.0 {
+                out.push(unit(
+                    obs,
+                    s,
+                    CountCovariates {
+                        range: Some(NearHistogram::range_centre(k)),
+                        ..CountCovariates::default()
+                    },
+                ));
+            }
+        }
+        out
+    }
+}
+
+/// The covariates of one point-level count unit (a laser, an azimuth
+/// sector or a range bin): the names it does not carry are `None`.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct CountCovariates {
+    /// Laser id.
+    pub ring: Option<f64>,
+    /// The laser's elevation, degrees.
+    pub elevation: Option<f64>,
+    /// Centre of the azimuth sector, degrees.
+    pub azimuth: Option<f64>,
+    /// Centre of the range bin of the returns' own range, metres.
+    pub range: Option<f64>,
+}
+
+impl CountCovariates {
+    /// The value of a point-level covariate by name.
+    pub fn get(&self, name: &str) -> Option<f64> {
+        match name {
+            "ring" => self.ring,
+            "elevation" => self.elevation,
+            "azimuth" => self.azimuth,
+            "range" => self.range,
+            _ => None,
+        }
+    }
+}
+
+/// One point-level count residual.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CountUnit {
+    /// What the unit groups.
+    pub cov: CountCovariates,
+    /// `ln((n_obs + ½)/(n_sim + ½))`.
+    pub residual: f64,
+    /// `n_sim + ½`.
+    pub weight: f64,
+    /// `n_obs`: returns measured.
+    pub observed: f64,
+    /// `n_sim`: returns simulated (mean over the simulations).
+    pub simulated: f64,
+}
+
+/// The per-recording point-level count loss along `covariate`: the
+/// weighted mean of |[`CountUnit::residual`]| over the units that carry it
+/// (the lasers for `ring` and `elevation`, the azimuth sectors for
+/// `azimuth`; `None` without simulations). Each axis is judged on its own
+/// units, so a misfit along another axis does not mask a term's gain.
+pub fn count_bin_loss(units: &[CountUnit], covariate: &str) -> Option<f64> {
+    let (s, w) = units
+        .iter()
+        .filter(|u| u.cov.get(covariate).is_some())
+        .fold((0.0, 0.0), |(s, w), u| {
+            (s + u.weight * u.residual.abs(), w + u.weight)
+        });
+    (w > 0.0).then(|| s / w)
 }
 
 /// True when the table's weather can use the soft edge.
@@ -215,11 +330,11 @@ fn evaluate_one(
                 - fac.max(1e-6).ln(),
         );
     }
-    let (near_sim, scene) = match sim {
-        None => (None, None),
+    let (near_sim, near_bins_sim, scene) = match sim {
+        None => (None, None, None),
         Some(opts) => {
-            let (n, s) = simulate(loaded, rec, &ap, opts, fit_params)?;
-            (Some(n), Some(s))
+            let (n, h, s) = simulate(loaded, rec, &ap, opts, fit_params)?;
+            (Some(n), Some(h), Some(s))
         }
     };
     Ok(RecEval {
@@ -228,6 +343,7 @@ fn evaluate_one(
         range_residual,
         intensity_residual,
         near_sim,
+        near_bins_sim,
         scene,
     })
 }
@@ -248,12 +364,13 @@ fn simulate(
     ap: &Applier,
     opts: &SimOptions,
     fit_params: &FitValidParams,
-) -> Result<(f64, SceneMetrics), DiagnoseError> {
+) -> Result<(f64, NearHistogram, SceneMetrics), DiagnoseError> {
     let clear_rec = &loaded.clear[rec.clear];
     let clear = &clear_rec.cloud;
     let measured = xyz(&read_calibrated(&rec.lidar, &loaded.spec)?);
     let grid = loaded.reference.grid();
     let mut near = 0.0;
+    let mut bins = NearHistogram::default();
     let mut acc = SceneMetrics {
         voxel_global_difference: 0.0,
         voxel_difference: 0.0,
@@ -273,6 +390,7 @@ fn simulate(
         })?;
         let t = pair_frames(&loaded.reference, &pts, clear_rec.frames, fit_params);
         near += (t.ghosts.len() + t.rings.len()) as f64;
+        bins.add_scaled(&NearHistogram::of_tally(&t, grid), 1.0 / n as f64);
         let m = SceneMetrics::compare(&measured, &xyz(&out), opts.voxel_m, opts.local_box.as_ref());
         acc.voxel_global_difference += m.voxel_global_difference;
         acc.voxel_difference += m.voxel_difference;
@@ -287,7 +405,7 @@ fn simulate(
     acc.voxel_difference /= k;
     acc.chamfer_m /= k;
     acc.voxel_local_difference = acc.voxel_local_difference.map(|v| v / k);
-    Ok((near / k, acc))
+    Ok((near / k, bins, acc))
 }
 
 /// Metrics over a set of evaluated recordings (the report's `metrics`).
@@ -302,6 +420,12 @@ pub struct Metrics {
     /// Mean over recordings of |ln((N_obs + 1)/(N_sim + 1))| of ghost and
     /// ring counts.
     pub count_abs_log_error: Option<f64>,
+    /// Mean over recordings of the ghost and ring counts' weighted mean
+    /// |ln((n_obs + ½)/(n_sim + ½))| per laser ([`count_bin_loss`]): how
+    /// they fall over the lasers, not only how many there are.
+    pub count_laser_abs_log_error: Option<f64>,
+    /// The same per azimuth sector.
+    pub count_sector_abs_log_error: Option<f64>,
     /// Mean range residual of kept returns, metres.
     pub range_bias_m: f64,
     /// RMS range residual of kept returns, metres.
@@ -328,6 +452,7 @@ impl Metrics {
         let mut ncr = 0.0;
         let (mut rs, mut rs2, mut is, mut is2, mut nk) = (0.0f64, 0.0f64, 0.0f64, 0.0f64, 0.0f64);
         let mut count = Vec::new();
+        let (mut count_lasers, mut count_sectors) = (Vec::new(), Vec::new());
         let mut scenes = Vec::new();
         for e in evals {
             let rec = &loaded.recs[e.rec];
@@ -354,6 +479,9 @@ impl Metrics {
             if let Some(c) = e.count_residual(rec) {
                 count.push(c.abs());
             }
+            let units = e.count_bin_residuals(loaded, rec);
+            count_lasers.extend(count_bin_loss(&units, "ring"));
+            count_sectors.extend(count_bin_loss(&units, "azimuth"));
             if let Some(s) = e.scene {
                 scenes.push(s);
             }
@@ -365,6 +493,8 @@ impl Metrics {
             survival_log_loss: ll / trials.max(1.0),
             no_change_rate_error: ncr / n,
             count_abs_log_error: mean(count),
+            count_laser_abs_log_error: mean(count_lasers),
+            count_sector_abs_log_error: mean(count_sectors),
             range_bias_m: rs / nk.max(1.0),
             range_rmse_m: (rs2 / nk.max(1.0)).sqrt(),
             intensity_bias: is / nk.max(1.0),
@@ -386,6 +516,26 @@ impl Metrics {
                     .filter(|c| c.is_finite())
                     .collect(),
             ),
+        }
+    }
+
+    /// The metric that measures `observable` along `covariate` (counts
+    /// along the lasers or azimuth: [`Metrics::count_laser_abs_log_error`],
+    /// [`Metrics::count_sector_abs_log_error`]).
+    pub fn of_test(
+        &self,
+        obs: ExtensionObservable,
+        covariate: &str,
+    ) -> (&'static str, Option<f64>) {
+        match (obs, covariate) {
+            (ExtensionObservable::Count, "ring" | "elevation") => {
+                ("count_laser_abs_log_error", self.count_laser_abs_log_error)
+            }
+            (ExtensionObservable::Count, "azimuth") => (
+                "count_sector_abs_log_error",
+                self.count_sector_abs_log_error,
+            ),
+            _ => self.of_observable(obs),
         }
     }
 

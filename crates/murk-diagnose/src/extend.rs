@@ -11,7 +11,10 @@
 //! - `range`: the mean range residual of the bin's kept returns;
 //! - `intensity`: `exp` of the mean log ratio of measured to reference
 //!   reflectivity;
-//! - `count`: `Σ(N_obs + ½) / Σ(N_sim + ½)` over the bin's recordings.
+//! - `count`: `Σ(N_obs + ½) / Σ(N_sim + ½)` over the bin's recordings; along
+//!   `ring`, `elevation` or `azimuth`, `(Σn_obs + ½)/(Σn_sim + ½)` over the
+//!   bin's lasers or azimuth sectors in every recording (a factor on the density of the near-range
+//!   returns on those rays).
 //!
 //! Every term is fitted on top of the terms the table already has (the
 //! stagewise loop adds one at a time): survival factors multiply theirs,
@@ -174,6 +177,31 @@ pub fn fit_term_with_edge(
             let v = s
                 .iter()
                 .map(|&(a, n)| (n >= MIN_TRIALS).then(|| tf(a / n)))
+                .collect();
+            (v, pooled)
+        }
+        ExtensionObservable::Count if murk_types::COUNT_RAY_COVARIATES.contains(&covariate) => {
+            // Per bin of lasers (or azimuth sectors): (Σn_obs + ½)/(Σn_sim + ½)
+            // over the fit set's recordings and the bin's units (a pseudo
+            // count per unit would pull sparse bins to 1), the factor
+            // on the density of the returns on those rays
+            // (`murk_types::RayDensity`, which `murk apply` places by).
+            let mut s = vec![(0.0f64, 0.0f64); nb];
+            for e in evals {
+                let rec = &loaded.recs[e.rec];
+                for u in e.count_bin_residuals(loaded, rec) {
+                    let Some(b) = u.cov.get(covariate).and_then(|x| binning.of_number(x)) else {
+                        continue;
+                    };
+                    s[b].0 += u.observed;
+                    s[b].1 += u.simulated;
+                }
+            }
+            let tot = s.iter().fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
+            let pooled = (tot.0 + 0.5) / (tot.1 + 0.5);
+            let v = s
+                .iter()
+                .map(|&(o, x)| (x > 0.0).then(|| (o + 0.5) / (x + 0.5)))
                 .collect();
             (v, pooled)
         }

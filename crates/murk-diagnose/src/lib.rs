@@ -16,7 +16,9 @@
 //!    murk-infer simulations from the nearest clear recording.
 //! 3. **Attribute** ([`attribution`]): each observable's held-out residual
 //!    against every point-level covariate (`range`, `reflectivity`, `ring`,
-//!    `elevation`, `azimuth`) and every scan-level one (`mor`, `timestamp`,
+//!    `elevation`, `azimuth`; for counts the rays' `ring`, `elevation` and
+//!    `azimuth`, the ghost and ring returns counted per laser and azimuth
+//!    sector, [`data::NearHistogram`]) and every scan-level one (`mor`, `timestamp`,
 //!    every `weather.csv` column, known or not), with permutation tests over
 //!    recordings, Holm's adjustment over all tests, and a relevance threshold
 //!    per observable ([`Relevance`]). A finding is *significant* only when
@@ -93,6 +95,28 @@
 //! on recordings holding the effect, gets wrong on this static scene beyond
 //! the edge that the term re-fits. The detection-power table above predates
 //! the stagewise extension.
+//!
+//! **Counts along the rays** (issue #13 item 3; measured 2026-12-03 with
+//! `tests/point_counts.rs`, 56 recordings of which about 40 in the weather;
+//! test profile). Hidden effect: the weather's ghost and ring returns three
+//! times as dense on the downward beams (elevation < 0°). Found = count ×
+//! elevation significant with count × ring `explained_by` it; the term's
+//! density ratio of downward to upward lasers against the truth 3.
+//!
+//! | source | seeds | found | false | step gain (`count_laser_abs_log_error`) | density ratio |
+//! |---|---|---|---|---|---|
+//! | generated fog | 61–63 | 3/3 | 0 | +33.9 to +37.6 % (p 0.0005) | 2.76–3.14 |
+//! | generated rain | 64–66 | 3/3 | 0 | +13.6 to +15.2 % (p ≤ 0.002) | 2.69–3.44 |
+//! | semi-real fog | 67 | 1/1 | count × timestamp and × range, both flagged without the effect too | +19.6 % (p 0.0005) | – |
+//! | generated nulls (fog 41–43, rain 44) | – | – | 0 | none | – |
+//!
+//! The semi-real source places weather returns only on firings that
+//! returned, the model on every ray: on its null campaigns count × azimuth
+//! is flagged at seed 45 (strength 1.9) and not at seed 67, count × range
+//! at both (3.4, 3.2). A count along
+//! the returns' own range is tested and reported but never extended: a
+//! term would reshape the near-range distance law, and the seed-004
+//! per-echo family (F_j(x) · F_l(φ)) is not built.
 //!
 //! **Architecture invariant:** the diagnosis reads measured data through
 //! murk-fit's pairing and simulates through murk-infer's applier, so what it
@@ -376,10 +400,27 @@ struct Test {
     outcome: TestOutcome,
 }
 
+/// The point-level covariates of a residual unit: a clear return's, or a
+/// count unit's (a laser or an azimuth sector of the ghost and ring returns).
+#[derive(Debug, Clone, Copy)]
+enum UnitCov {
+    Point(murk_types::PointCovariates),
+    Count(evaluate::CountCovariates),
+}
+
+impl UnitCov {
+    fn get(&self, name: &str) -> Option<f64> {
+        match self {
+            UnitCov::Point(p) => p.get(name),
+            UnitCov::Count(c) => c.get(name),
+        }
+    }
+}
+
 /// Residual units of the held-out set, per observable.
 struct Residuals {
     /// (recording index into the pooled list, point covariates, residual, weight).
-    points: BTreeMap<ExtensionObservable, Vec<(usize, murk_types::PointCovariates, f64, f64)>>,
+    points: BTreeMap<ExtensionObservable, Vec<(usize, UnitCov, f64, f64)>>,
     /// Per recording (pooled order): recording-level residual per observable.
     scans: BTreeMap<ExtensionObservable, Vec<Option<f64>>>,
 }
@@ -394,7 +435,7 @@ fn residuals(loaded: &Loaded, evals: &[RecEval]) -> Residuals {
         let sv = points.entry(Survival).or_default();
         let (mut s, mut w) = (0.0, 0.0);
         for (u, (r, wt)) in rec.units.iter().zip(e.survival_residuals(rec)) {
-            sv.push((i, cell(u.cell), r, wt));
+            sv.push((i, UnitCov::Point(cell(u.cell)), r, wt));
             s += r * wt;
             w += wt;
         }
@@ -408,12 +449,16 @@ fn residuals(loaded: &Loaded, evals: &[RecEval]) -> Residuals {
         ] {
             let v = points.entry(obs).or_default();
             for (k, r) in rec.kept.iter().zip(res) {
-                v.push((i, cell(k.cell), *r, 1.0));
+                v.push((i, UnitCov::Point(cell(k.cell)), *r, 1.0));
             }
             let m = (!res.is_empty()).then(|| res.iter().sum::<f64>() / res.len() as f64);
             scans.entry(obs).or_default().push(m);
         }
         scans.entry(Count).or_default().push(e.count_residual(rec));
+        let cv = points.entry(Count).or_default();
+        for u in e.count_bin_residuals(loaded, rec) {
+            cv.push((i, UnitCov::Count(u.cov), u.residual, u.weight));
+        }
     }
     Residuals { points, scans }
 }
@@ -585,11 +630,11 @@ impl DiagnoseValidParams {
             Some(m) if !sw.steps.is_empty() => {
                 let mut gains: Vec<Gain> = Vec::new();
                 for s in &sw.steps {
-                    let (metric, before) = baseline_metrics.of_observable(s.observable);
+                    let (metric, before) = baseline_metrics.of_test(s.observable, &s.covariate);
                     if gains.iter().any(|g| g.metric == metric) {
                         continue;
                     }
-                    let (_, after) = m.of_observable(s.observable);
+                    let (_, after) = m.of_test(s.observable, &s.covariate);
                     gains.extend(relative_gain(metric, before, after));
                 }
                 let extensions = sw
@@ -841,7 +886,14 @@ impl DiagnoseValidParams {
             ExtensionObservable::Range,
             ExtensionObservable::Intensity,
         ] {
-            if obs != ExtensionObservable::Count {
+            if obs == ExtensionObservable::Count {
+                // Counts per laser and azimuth sector (the rays the
+                // near-range returns fall on) and per bin of their own
+                // range.
+                for c in murk_types::COUNT_RAY_COVARIATES.iter().chain(&["range"]) {
+                    specs.push((obs, c.to_string(), true));
+                }
+            } else {
                 for c in POINT_COVARIATES {
                     specs.push((obs, c.to_string(), true));
                 }
@@ -1014,9 +1066,15 @@ impl DiagnoseValidParams {
         let scan_of = |r: usize| &loaded.recs[evals[r].rec].scan;
         let b_scan = |r: usize| prof(scan_of(r).get(&b.covariate).and_then(|v| b.binning.of(v)));
         match res.points.get(&a.observable) {
-            Some(pts) if a.point_level || b.point_level => {
+            // A scan-level count test keeps the recording's own count
+            // residual: a point-level count profile is centred per
+            // recording, so removing it leaves that residual as it is.
+            Some(pts)
+                if a.point_level
+                    || (b.point_level && a.observable != ExtensionObservable::Count) =>
+            {
                 // Point residuals with b removed.
-                let adj: Vec<(usize, murk_types::PointCovariates, f64, f64)> = pts
+                let adj: Vec<(usize, UnitCov, f64, f64)> = pts
                     .iter()
                     .map(|(r, pc, e, w)| {
                         let off = if b.point_level {

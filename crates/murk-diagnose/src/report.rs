@@ -347,6 +347,10 @@ pub fn cause(f: &Finding, weather: WeatherClass) -> String {
         {
             Some("wet-road specular loss on ground rings: returns from the road surface vanish sooner than the model's slopes say".to_string())
         }
+        (ExtensionObservable::Count, "elevation" | "ring" | "azimuth", _) => Some(format!(
+            "ghost and ring returns fall more often on some rays than the model's uniform placement says (counted per laser and {}° azimuth sector, against simulations from the same clear scene)",
+            360 / crate::data::AZIMUTH_SECTORS
+        )),
         (ExtensionObservable::Count, "mor", Some(false)) => Some(
             "droplet backscatter near the sensor grows faster as visibility falls than the fitted count law".to_string(),
         ),

@@ -47,6 +47,25 @@ use murk_fit::FitValidParams;
 /// Candidates of one observable fitted and compared per step.
 pub const CANDIDATES_PER_STEP: usize = 3;
 
+/// The loss of one held-out recording on `obs` along `covariate`: mean log
+/// loss per expected return (survival), mean square residual of kept
+/// returns (range, intensity), |log count ratio| (count along a scan-level
+/// covariate) or its weighted mean per laser or azimuth sector (count along
+/// `ring`, `elevation` or `azimuth`, [`crate::evaluate::count_bin_loss`]).
+/// `None` without data.
+pub fn recording_loss_of(
+    loaded: &Loaded,
+    e: &RecEval,
+    obs: ExtensionObservable,
+    covariate: &str,
+) -> Option<f64> {
+    if obs == ExtensionObservable::Count && murk_types::COUNT_RAY_COVARIATES.contains(&covariate) {
+        let rec = &loaded.recs[e.rec];
+        return crate::evaluate::count_bin_loss(&e.count_bin_residuals(loaded, rec), covariate);
+    }
+    recording_loss(loaded, e, obs)
+}
+
 /// The loss of one held-out recording on `obs`: mean log loss per expected
 /// return (survival), mean square residual of kept returns (range,
 /// intensity), |log count ratio| (count). `None` without data.
@@ -69,6 +88,16 @@ pub fn recording_loss(loaded: &Loaded, e: &RecEval, obs: ExtensionObservable) ->
         ExtensionObservable::Intensity => mean_sq(e.intensity_residual.as_slice()),
         ExtensionObservable::Count => e.count_residual(rec).map(f64::abs),
     }
+}
+
+/// True when a term along `covariate` can be built for `obs`: every
+/// covariate but a count along the returns' own `range`, which would
+/// reshape the near-range distance law (the seed-004 per-echo family is not
+/// built). Such a finding is reported, never extended.
+pub fn has_term_shape(obs: ExtensionObservable, covariate: &str) -> bool {
+    !(obs == ExtensionObservable::Count
+        && murk_types::POINT_COVARIATES.contains(&covariate)
+        && !murk_types::COUNT_RAY_COVARIATES.contains(&covariate))
 }
 
 /// A candidate term fitted per fold and evaluated held-out.
@@ -118,6 +147,9 @@ pub(crate) fn term_text(obs: ExtensionObservable, covariate: &str, bins: usize) 
         "{} × f({covariate}) — piecewise constant over {bins} bins, fitted per fold on the fit set",
         match obs {
             ExtensionObservable::Survival => "vanishing distance",
+            ExtensionObservable::Count if murk_types::COUNT_RAY_COVARIATES.contains(&covariate) => {
+                "density of ghost and ring returns on the rays"
+            }
             ExtensionObservable::Count => "expected ghost and ring count",
             ExtensionObservable::Range => "range of kept returns +",
             ExtensionObservable::Intensity => "reflectivity of kept returns",
@@ -161,6 +193,7 @@ impl DiagnoseValidParams {
             for i in rank(&findings) {
                 let f = &findings[i];
                 if !f.significant
+                    || !has_term_shape(f.observable, &f.covariate)
                     || rejected_keys.contains_key(&key(f))
                     || accepted.iter().any(|(_, k)| *k == key(f))
                 {
@@ -345,6 +378,7 @@ impl DiagnoseValidParams {
                 for e in held.iter_mut() {
                     if let Some(old) = evals.iter().find(|o| o.rec == e.rec) {
                         e.near_sim = old.near_sim;
+                        e.near_bins_sim = old.near_bins_sim.clone();
                         e.scene = old.scene;
                     }
                 }
@@ -360,7 +394,10 @@ impl DiagnoseValidParams {
             .iter()
             .zip(&new_evals)
             .filter_map(|(a, b)| {
-                Some(recording_loss(loaded, a, obs)? - recording_loss(loaded, b, obs)?)
+                Some(
+                    recording_loss_of(loaded, a, obs, &t.covariate)?
+                        - recording_loss_of(loaded, b, obs, &t.covariate)?,
+                )
             })
             .collect();
         let seed = seed_of(
@@ -369,8 +406,8 @@ impl DiagnoseValidParams {
             &["paired", obs.name(), &t.covariate, &round.to_string()],
         );
         let p_value = paired_gain_test(&d, p.permutations, seed);
-        let (metric, before) = Metrics::of(loaded, evals).of_observable(obs);
-        let (_, after) = Metrics::of(loaded, &new_evals).of_observable(obs);
+        let (metric, before) = Metrics::of(loaded, evals).of_test(obs, &t.covariate);
+        let (_, after) = Metrics::of(loaded, &new_evals).of_test(obs, &t.covariate);
         Ok(Candidate {
             tables: new_tables,
             evals: new_evals,
@@ -449,17 +486,25 @@ fn annotate(
             continue;
         };
         if r == last {
-            // Still significant: the step cap stopped the loop first.
+            // Still significant: the step cap stopped the loop first, or no
+            // term has its shape.
             if !f.significant
                 && let Some(g) = find(r, &k)
             {
                 *f = g.clone();
             }
-            f.cause = format!(
-                "{} (not extended: the {} steps allowed were used first)",
-                f.cause,
-                crate::MAX_STEPS
-            );
+            f.cause = if has_term_shape(f.observable, &f.covariate) {
+                format!(
+                    "{} (not extended: the {} steps allowed were used first)",
+                    f.cause,
+                    crate::MAX_STEPS
+                )
+            } else {
+                format!(
+                    "{} (not extended: a count along the returns' own range would reshape the near-range distance law, and that law family is not built)",
+                    f.cause
+                )
+            };
             continue;
         }
         // Significant in round r, not after the step accepted then.

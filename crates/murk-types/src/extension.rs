@@ -235,9 +235,13 @@ impl ModelExtension {
                 return Err(format!("factor {v} is negative"));
             }
         }
-        if self.observable == ExtensionObservable::Count && self.is_point_level() {
+        if self.observable == ExtensionObservable::Count
+            && self.is_point_level()
+            && !COUNT_RAY_COVARIATES.contains(&self.covariate.as_str())
+        {
             return Err(format!(
-                "a count term needs a scan-level covariate (mor or a weather.csv column), not {:?}",
+                "a count term needs a covariate of the near-range return's ray ({}) or a scan-level one (mor or a weather.csv column), not {:?}",
+                COUNT_RAY_COVARIATES.join(", "),
                 self.covariate
             ));
         }
@@ -280,6 +284,143 @@ impl ModelExtension {
                 .unwrap_or(self.default),
             _ => self.default,
         }
+    }
+}
+
+/// The point-level covariates a count term may follow: those of the ray a
+/// near-range return is placed on (its laser `ring`, that laser's
+/// `elevation`, and the ray's `azimuth`). The other point-level names
+/// describe a clear return, which a ghost on an empty ray does not have.
+pub const COUNT_RAY_COVARIATES: [&str; 3] = ["ring", "elevation", "azimuth"];
+
+/// Where near-range (ghost and ring) returns fall: the one evaluation of the
+/// point-level count terms, used by `murk apply` when it places the returns
+/// (`murk diagnose` measures such terms through `murk apply`'s simulations).
+///
+/// The expected number of returns a scan places on the ray `(ring, azimuth)`
+/// is `N/(R·B) · g(ring)·h(azimuth)`, where `N` is the count law's
+/// expectation (times the scan-level count terms), `R·B` the rays (rings
+/// present × azimuth bins), `g` the product of the count terms along `ring`
+/// and `elevation` and `h` the product of those along `azimuth`. So the
+/// terms both redistribute the returns over the rays and scale their total
+/// by the mean of `g` over the rings times the mean of `h` over the bins
+/// ([`RayDensity::total_factor`]). Without point-level count terms both are
+/// 1 and the placement is uniform.
+///
+/// ```
+/// use murk_types::{ExtensionFunction, ExtensionObservable, ModelExtension, RayDensity};
+///
+/// // Three times as many returns on the downward beams.
+/// let t = ModelExtension {
+///     observable: ExtensionObservable::Count,
+///     covariate: "elevation".into(),
+///     function: ExtensionFunction::Bins { edges: vec![0.0], values: vec![3.0, 1.0] },
+///     default: 1.0,
+///     description: String::new(),
+/// };
+/// let d = RayDensity::new(std::slice::from_ref(&t));
+/// let rings = [(0u16, -15.0), (1, 1.0), (2, -13.0), (3, 3.0)];
+/// let g = d.ring_weights(&rings);
+/// assert_eq!(g, vec![3.0, 1.0, 3.0, 1.0]);
+/// assert_eq!(d.total_factor(&g, &[1.0]), 2.0);
+/// ```
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct RayDensity {
+    beam: Vec<ModelExtension>,
+    azimuth: Vec<ModelExtension>,
+}
+
+impl RayDensity {
+    /// The point-level count terms among `terms` (others are ignored).
+    pub fn new(terms: &[ModelExtension]) -> RayDensity {
+        let of = |names: &[&str]| -> Vec<ModelExtension> {
+            terms
+                .iter()
+                .filter(|t| {
+                    t.observable == ExtensionObservable::Count
+                        && names.contains(&t.covariate.as_str())
+                })
+                .cloned()
+                .collect()
+        };
+        RayDensity {
+            beam: of(&["ring", "elevation"]),
+            azimuth: of(&["azimuth"]),
+        }
+    }
+
+    /// True when no term changes the placement (uniform over the rays).
+    pub fn is_uniform(&self) -> bool {
+        self.beam.is_empty() && self.azimuth.is_empty()
+    }
+
+    /// True when a term follows `ring` or `elevation`.
+    pub fn has_beam_terms(&self) -> bool {
+        !self.beam.is_empty()
+    }
+
+    /// True when a term follows `azimuth`.
+    pub fn has_azimuth_terms(&self) -> bool {
+        !self.azimuth.is_empty()
+    }
+
+    fn product(terms: &[ModelExtension], p: &PointCovariates) -> f64 {
+        let scan = BTreeMap::new();
+        terms
+            .iter()
+            .map(|t| t.value(Some(p), &scan, f64::NAN).max(0.0))
+            .product()
+    }
+
+    /// `g` of each `(ring, elevation in degrees)`.
+    pub fn ring_weights(&self, rings: &[(u16, f64)]) -> Vec<f64> {
+        rings
+            .iter()
+            .map(|&(ring, elevation)| {
+                Self::product(
+                    &self.beam,
+                    &PointCovariates {
+                        range: f64::NAN,
+                        reflectivity: f64::NAN,
+                        ring,
+                        elevation,
+                        azimuth: f64::NAN,
+                    },
+                )
+            })
+            .collect()
+    }
+
+    /// `h` of each azimuth (degrees).
+    pub fn azimuth_weights(&self, azimuths_deg: &[f64]) -> Vec<f64> {
+        azimuths_deg
+            .iter()
+            .map(|&azimuth| {
+                Self::product(
+                    &self.azimuth,
+                    &PointCovariates {
+                        range: f64::NAN,
+                        reflectivity: f64::NAN,
+                        ring: u16::MAX,
+                        elevation: f64::NAN,
+                        azimuth,
+                    },
+                )
+            })
+            .collect()
+    }
+
+    /// The factor on the scan's expected count: mean of the ring weights
+    /// times mean of the azimuth weights (1 for empty lists).
+    pub fn total_factor(&self, ring_weights: &[f64], azimuth_weights: &[f64]) -> f64 {
+        let mean = |v: &[f64]| {
+            if v.is_empty() {
+                1.0
+            } else {
+                v.iter().sum::<f64>() / v.len() as f64
+            }
+        };
+        mean(ring_weights) * mean(azimuth_weights)
     }
 }
 
@@ -337,6 +478,8 @@ mod tests {
         assert_eq!(e.value(None, &scan, 50.0), 2.0);
         assert!(e.check().is_ok());
         e.covariate = "ring".into();
+        assert!(e.check().is_ok());
+        e.covariate = "reflectivity".into();
         assert!(e.check().unwrap_err().contains("scan-level"));
         // A point straight ahead, 1 m up at 10 m: elevation atan(0.1).
         let p = PointCovariates::of_point(10.0, 0.0, 1.0, 7.0, 3);

@@ -66,8 +66,8 @@ pub use cloud::PointCloud;
 pub use edge::{EdgeShape, LOGISTIC_UNIT};
 pub use error::TypesError;
 pub use extension::{
-    CovariateValue, ExtensionFunction, ExtensionObservable, ModelExtension, POINT_COVARIATES,
-    PointCovariates, combine as combine_extensions,
+    COUNT_RAY_COVARIATES, CovariateValue, ExtensionFunction, ExtensionObservable, ModelExtension,
+    POINT_COVARIATES, PointCovariates, RayDensity, combine as combine_extensions,
 };
 pub use format::{BinLayout, PointFormat};
 pub use intensity::IntensityScale;
