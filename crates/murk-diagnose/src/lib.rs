@@ -126,7 +126,7 @@ use rayon::prelude::*;
 pub use error::DiagnoseError;
 pub use report::{
     DIAGNOSIS_FORMAT, Diagnosis, Extended, Finding, Gain, Level, ModelMetrics, Rejected, Report,
-    Step,
+    ShapeParameter, ShapeTried, Step,
 };
 
 use attribution::{Binning, TestOutcome, holm, point_test, scan_test};
