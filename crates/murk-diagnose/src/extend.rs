@@ -178,8 +178,14 @@ pub fn fit_term_with_edge(
     binning: &Binning,
     refit_edge: bool,
 ) -> Result<FittedTerm, DiagnoseError> {
-    let fit = fit_bins(loaded, table, evals, observable, covariate, binning, refit_edge)?;
-    let values: Vec<f64> = fit.values.iter().map(|v| v.unwrap_or(fit.default)).collect();
+    let fit = fit_bins(
+        loaded, table, evals, observable, covariate, binning, refit_edge,
+    )?;
+    let values: Vec<f64> = fit
+        .values
+        .iter()
+        .map(|v| v.unwrap_or(fit.default))
+        .collect();
     let function = match binning {
         Binning::Numeric { edges } => ExtensionFunction::Bins {
             edges: edges.clone(),
@@ -189,7 +195,14 @@ pub fn fit_term_with_edge(
             values: names.iter().cloned().zip(values).collect(),
         },
     };
-    finish(observable, covariate, evals.len(), function, fit.default, fit.edge)
+    finish(
+        observable,
+        covariate,
+        evals.len(),
+        function,
+        fit.default,
+        fit.edge,
+    )
 }
 
 /// The term with its description, checked.
@@ -658,15 +671,17 @@ pub fn fit_shaped(
 ) -> Result<Option<FittedTerm>, DiagnoseError> {
     let n = evals.len();
     match shape {
-        Shape::Bins => {
-            fit_term_with_edge(loaded, table, evals, observable, covariate, binning, refit_edge)
-                .map(Some)
-        }
+        Shape::Bins => fit_term_with_edge(
+            loaded, table, evals, observable, covariate, binning, refit_edge,
+        )
+        .map(Some),
         Shape::Step | Shape::Monotone => {
             let Binning::Numeric { edges } = binning else {
                 return Ok(None);
             };
-            let fit = fit_bins(loaded, table, evals, observable, covariate, binning, refit_edge)?;
+            let fit = fit_bins(
+                loaded, table, evals, observable, covariate, binning, refit_edge,
+            )?;
             let tf = |v: f64| {
                 if observable.multiplicative() {
                     v.max(1e-9).ln()
@@ -694,7 +709,8 @@ pub fn fit_shaped(
                 let mut t = fit_term_with_edge(
                     loaded, table, evals, observable, covariate, &one, refit_edge,
                 )?;
-                t.term.description = format!("{} (a step at {})", t.term.description, edges[cut - 1]);
+                t.term.description =
+                    format!("{} (a step at {})", t.term.description, edges[cut - 1]);
                 return Ok(Some(t));
             }
             // Knots strictly ascending (bins are disjoint, so their means
@@ -716,16 +732,22 @@ pub fn fit_shaped(
                     .sum()
             };
             let best = if sse(&up) <= sse(&down) { up } else { down };
-            let back = |v: f64| if observable.multiplicative() { v.exp() } else { v };
+            let back = |v: f64| {
+                if observable.multiplicative() {
+                    v.exp()
+                } else {
+                    v
+                }
+            };
             let function = ExtensionFunction::Monotone {
                 knots: pts.iter().map(|p| p.3).collect(),
                 values: best.into_iter().map(back).collect(),
             };
             finish(observable, covariate, n, function, fit.default, fit.edge).map(Some)
         }
-        Shape::Attenuation | Shape::Linear | Shape::Power => {
-            fit_parametric(loaded, table, evals, observable, covariate, shape, refit_edge, bootstrap, seed)
-        }
+        Shape::Attenuation | Shape::Linear | Shape::Power => fit_parametric(
+            loaded, table, evals, observable, covariate, shape, refit_edge, bootstrap, seed,
+        ),
     }
 }
 
@@ -919,7 +941,12 @@ fn fit_parametric(
                 return Ok(None);
             };
             let iv = bootstrap_lines(&per, true, bootstrap, seed).map(|v| v[1]);
-            pooled_fit(default, ExtensionFunction::Attenuation { k }, None, vec![iv])
+            pooled_fit(
+                default,
+                ExtensionFunction::Attenuation { k },
+                None,
+                vec![iv],
+            )
         }
         (Shape::Power, true) => {
             // ln f = ln a + b·ln x.

@@ -252,7 +252,8 @@ impl DiagnoseValidParams {
                 break;
             };
             let t = &tests[i];
-            let (table, fitted) = self.with_full_term(loaded, &full, t, c.shape, sim, fit_params)?;
+            let (table, fitted) =
+                self.with_full_term(loaded, &full, t, c.shape, sim, fit_params)?;
             full = table;
             let parameters = fitted
                 .term
