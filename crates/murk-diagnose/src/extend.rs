@@ -181,6 +181,17 @@ pub fn fit_term_with_edge(
     let fit = fit_bins(
         loaded, table, evals, observable, covariate, binning, refit_edge,
     )?;
+    bins_term(&fit, observable, covariate, binning, evals.len())
+}
+
+/// The piecewise-constant term of a bins fit.
+fn bins_term(
+    fit: &BinsFit,
+    observable: ExtensionObservable,
+    covariate: &str,
+    binning: &Binning,
+    recordings: usize,
+) -> Result<FittedTerm, DiagnoseError> {
     let values: Vec<f64> = fit
         .values
         .iter()
@@ -198,11 +209,18 @@ pub fn fit_term_with_edge(
     finish(
         observable,
         covariate,
-        evals.len(),
+        recordings,
         function,
         fit.default,
         fit.edge,
     )
+}
+
+/// The bins fit of one fold, shared by the shapes built on it (bins, the
+/// step's split, monotone): [`fit_shaped`] fills it on first use.
+#[derive(Default)]
+pub struct ShapeCache {
+    bins: Option<BinsFit>,
 }
 
 /// The term with its description, checked.
@@ -653,7 +671,8 @@ pub fn shapes(observable: ExtensionObservable, binning: &Binning) -> Vec<Shape> 
 /// for the piecewise shapes) from the fit-set evaluations `evals` under
 /// `table`, re-fitting the soft edge with a survival term when
 /// `refit_edge`. The parametric forms' intervals come from `bootstrap`
-/// resamples of the recordings seeded by `seed` (none when 0). `None`
+/// resamples of the recordings seeded by `seed` (none when 0). The shapes
+/// of one fold share `cache` (pass one per fold and covariate). `None`
 /// when the shape cannot be fitted on these data (a power law without
 /// positive covariate values, no split with data on both sides).
 #[allow(clippy::too_many_arguments)]
@@ -668,20 +687,24 @@ pub fn fit_shaped(
     refit_edge: bool,
     bootstrap: usize,
     seed: u64,
+    cache: &mut ShapeCache,
 ) -> Result<Option<FittedTerm>, DiagnoseError> {
     let n = evals.len();
-    match shape {
-        Shape::Bins => fit_term_with_edge(
+    if matches!(shape, Shape::Bins | Shape::Step | Shape::Monotone) && cache.bins.is_none() {
+        cache.bins = Some(fit_bins(
             loaded, table, evals, observable, covariate, binning, refit_edge,
-        )
-        .map(Some),
+        )?);
+    }
+    match shape {
+        Shape::Bins => {
+            let fit = cache.bins.as_ref().expect("filled above");
+            bins_term(fit, observable, covariate, binning, n).map(Some)
+        }
         Shape::Step | Shape::Monotone => {
             let Binning::Numeric { edges } = binning else {
                 return Ok(None);
             };
-            let fit = fit_bins(
-                loaded, table, evals, observable, covariate, binning, refit_edge,
-            )?;
+            let fit = cache.bins.as_ref().expect("filled above");
             let tf = |v: f64| {
                 if observable.multiplicative() {
                     v.max(1e-9).ln()

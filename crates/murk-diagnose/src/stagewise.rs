@@ -372,6 +372,7 @@ impl DiagnoseValidParams {
             let in_sample = evaluate(loaded, table, &fit_set, with_sim, fit_params)?;
             let binning = self.extension_binning(loaded, &fit_set, t);
             bins = binning.len();
+            let mut cache = extend::ShapeCache::default();
             for tr in tried.iter_mut().filter(|tr| tr.ok) {
                 let Some(term) = extend::fit_shaped(
                     loaded,
@@ -384,6 +385,7 @@ impl DiagnoseValidParams {
                     true,
                     0,
                     0,
+                    &mut cache,
                 )?
                 else {
                     tr.ok = false;
@@ -557,7 +559,8 @@ impl DiagnoseValidParams {
             Purpose::Bootstrap,
             &["shape", t.observable.name(), &t.covariate],
         );
-        let fit = |shape| {
+        let mut cache = extend::ShapeCache::default();
+        let mut fit = |shape| {
             extend::fit_shaped(
                 loaded,
                 full,
@@ -569,6 +572,7 @@ impl DiagnoseValidParams {
                 true,
                 extend::BOOTSTRAP,
                 seed,
+                &mut cache,
             )
         };
         // The shape fitted in every fold fits on all of them; bins always do.
