@@ -55,16 +55,18 @@ pub(crate) fn scan_value(
     )
 }
 
-/// Per-point value of the point-level terms on `obs` times (plus) the scan
+/// Per-point value of the point-level terms on `obs` at the applied MOR
+/// `mor` (a term such as `exp(−k·r/MOR)` reads both) times (plus) the scan
 /// value `base`.
 fn point_value(
     terms: &[&ModelExtension],
     obs: ExtensionObservable,
     p: &PointCovariates,
+    mor: f64,
     base: f64,
 ) -> f64 {
     let scan = BTreeMap::new();
-    let v = terms.iter().map(|t| t.value(Some(p), &scan, 0.0));
+    let v = terms.iter().map(|t| t.value(Some(p), &scan, mor));
     if obs.multiplicative() {
         base * v.product::<f64>()
     } else {
@@ -180,19 +182,22 @@ impl Applier {
                             refl,
                             cloud.ring[i],
                         );
-                        let f = point_value(&surv_pt, ExtensionObservable::Survival, &p, surv0);
+                        let f =
+                            point_value(&surv_pt, ExtensionObservable::Survival, &p, mor, surv0);
                         let prob = self.survival_probability(p.range, refl, f, true);
                         // One draw per point whatever the law, so the stream
                         // does not depend on which points are certain.
                         let u: f64 = rng.random();
                         let keep = u < prob;
-                        let bias = point_value(&range_pt, ExtensionObservable::Range, &p, range0);
+                        let bias =
+                            point_value(&range_pt, ExtensionObservable::Range, &p, mor, range0);
                         let range_factor = if p.range > 0.0 {
                             ((p.range + bias).max(0.0) / p.range) as f32
                         } else {
                             1.0
                         };
-                        let fi = point_value(&int_pt, ExtensionObservable::Intensity, &p, int0);
+                        let fi =
+                            point_value(&int_pt, ExtensionObservable::Intensity, &p, mor, int0);
                         let intensity = if fi == 1.0 {
                             raw
                         } else {

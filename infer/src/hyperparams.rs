@@ -591,7 +591,7 @@ impl ApplyParams {
                         ),
                     });
                 }
-                (ExtensionFunction::Bins { .. }, Some(CovariateValue::Text(t))) => {
+                (f, Some(CovariateValue::Text(t))) if f.is_numeric() => {
                     return Err(InferError::InvalidParam {
                         name: "covariate",
                         value: format!("{}={t}", e.covariate),

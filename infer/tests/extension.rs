@@ -332,3 +332,68 @@ fn count_terms_along_the_beams_place_ghosts_by_their_density() {
     );
     assert!(out.len() > 16);
 }
+
+#[test]
+fn the_monotone_and_parametric_shapes_apply_at_the_applied_mor() {
+    let shaped =
+        |obs: ExtensionObservable, cov: &str, function: ExtensionFunction| ModelExtension {
+            observable: obs,
+            covariate: cov.into(),
+            function,
+            default: obs.neutral(),
+            description: String::new(),
+        };
+    let t = table(vec![
+        // Two-way attenuation of reflectivity: exp(−k·r/MOR).
+        shaped(
+            ExtensionObservable::Intensity,
+            "range",
+            ExtensionFunction::Attenuation {
+                k: 2.0 * 20f64.ln(),
+            },
+        ),
+        // A range bias growing as MOR falls: 2 m / MOR.
+        shaped(
+            ExtensionObservable::Range,
+            "mor",
+            ExtensionFunction::Power {
+                scale: 2.0,
+                exponent: -1.0,
+            },
+        ),
+        // Vanishing distance × 1 up to 10 m, falling linearly to 0.5 at
+        // 30 m and beyond.
+        shaped(
+            ExtensionObservable::Survival,
+            "range",
+            ExtensionFunction::Monotone {
+                knots: vec![10.0, 30.0],
+                values: vec![1.0, 0.5],
+            },
+        ),
+    ]);
+    let mut scan = PointCloud::with_capacity(3);
+    scan.push(10.0, 0.0, 0.0, 50.0, 0); // factor 1: 10 < 40 kept
+    scan.push(20.0, 0.0, 0.0, 50.0, 1); // factor 0.75: 20 < 30 kept
+    scan.push(35.0, 0.0, 0.0, 50.0, 2); // factor 0.5: 35 > 20 vanishes
+    for mor in [100.0, 50.0] {
+        let ap = ApplyParams::new(WeatherClass::Fog, Severity::Mor(mor))
+            .build(&t)
+            .unwrap();
+        let (out, _) = ap.apply(&scan, "s").unwrap();
+        let factor = |r: f64| 50.0 * (-2.0 * 20f64.ln() * r / mor).exp();
+        if mor == 100.0 {
+            assert_eq!(out.ring, vec![0, 1]);
+        }
+        let bias = 2.0 / mor;
+        for (i, r) in [10.0f64, 20.0].into_iter().take(out.len()).enumerate() {
+            assert!(
+                (out.intensity[i] as f64 - factor(r)).abs() < 1e-3,
+                "MOR {mor}: {} vs {}",
+                out.intensity[i],
+                factor(r)
+            );
+            assert!((out.x[i] as f64 - (r + bias)).abs() < 1e-4, "{}", out.x[i]);
+        }
+    }
+}

@@ -22,6 +22,28 @@
 //!
 //! Bins with too little data (fewer than [`MIN_TRIALS`] returns, or no
 //! recording) take the pooled value, which is also the term's default.
+//!
+//! Beside the bins a numeric covariate's term can take other [`Shape`]s
+//! ([`fit_shaped`]); `stagewise` fits each one per fold and keeps the one
+//! the held-out recordings prefer:
+//!
+//! - `step`: two bins, the split the bins' values are best cut at
+//!   (weighted squares of the per-bin estimates), re-fitted as above;
+//! - `monotone`: isotonic regression (pool adjacent violators, increasing
+//!   or decreasing, whichever fits the bins closer, weighted by their
+//!   returns) through the bins' estimates, linear between the bins'
+//!   weighted mean covariate values;
+//! - `attenuation` (survival, intensity): `exp(−k·x/MOR)`, `k` by maximum
+//!   likelihood (survival, golden-section search, the soft edge re-fitted
+//!   with it) or least squares on the log ratio (intensity, closed form);
+//! - `linear` (range): `a + b·x`, least squares;
+//! - `power` (range, intensity; covariates > 0): `a·x^b`, least squares
+//!   (intensity on the log ratio, closed form; range by golden-section on
+//!   `b` with `a` closed form).
+//!
+//! The closed-form parameters carry a 95 % interval from a bootstrap over
+//! recordings (the returns of one recording share its MOR reading, so the
+//! recording is the unit resampled); the others carry none.
 
 use std::collections::BTreeMap;
 
@@ -49,6 +71,22 @@ fn bin_of(
     match point.get(covariate) {
         Some(x) => binning.of_number(x),
         None => scan.get(covariate).and_then(|v| binning.of(v)),
+    }
+}
+
+/// The numeric value of `covariate` for a point of a recording (`None`:
+/// categorical or unknown).
+fn x_of(
+    covariate: &str,
+    point: &murk_types::PointCovariates,
+    scan: &BTreeMap<String, CovariateValue>,
+) -> Option<f64> {
+    match point.get(covariate) {
+        Some(x) => Some(x),
+        None => match scan.get(covariate) {
+            Some(CovariateValue::Number(x)) if x.is_finite() => Some(*x),
+            _ => None,
+        },
     }
 }
 
@@ -104,6 +142,10 @@ pub struct FittedTerm {
     /// dropout and residual; re-fitting them with the term removes that
     /// echo (a survival misfit along range, and azimuth on a static site).
     pub edge: Option<EdgeRefit>,
+    /// 95 % intervals (bootstrap over recordings) of the function's
+    /// [`ExtensionFunction::parameters`], in their order; empty when the
+    /// shape has none or they were not computed.
+    pub intervals: Vec<Option<[f64; 2]>>,
 }
 
 impl FittedTerm {
@@ -139,13 +181,116 @@ pub fn fit_term_with_edge(
     binning: &Binning,
     refit_edge: bool,
 ) -> Result<FittedTerm, DiagnoseError> {
+    let fit = fit_bins(
+        loaded, table, evals, observable, covariate, binning, refit_edge,
+    )?;
+    bins_term(&fit, observable, covariate, binning, evals.len())
+}
+
+/// The piecewise-constant term of a bins fit.
+fn bins_term(
+    fit: &BinsFit,
+    observable: ExtensionObservable,
+    covariate: &str,
+    binning: &Binning,
+    recordings: usize,
+) -> Result<FittedTerm, DiagnoseError> {
+    let values: Vec<f64> = fit
+        .values
+        .iter()
+        .map(|v| v.unwrap_or(fit.default))
+        .collect();
+    let function = match binning {
+        Binning::Numeric { edges } => ExtensionFunction::Bins {
+            edges: edges.clone(),
+            values,
+        },
+        Binning::Categories { names } => ExtensionFunction::Categories {
+            values: names.iter().cloned().zip(values).collect(),
+        },
+    };
+    finish(
+        observable,
+        covariate,
+        recordings,
+        function,
+        fit.default,
+        fit.edge,
+    )
+}
+
+/// The bins fit of one fold, shared by the shapes built on it (bins, the
+/// step's split, monotone): [`fit_shaped`] fills it on first use.
+#[derive(Default)]
+pub struct ShapeCache {
+    bins: Option<BinsFit>,
+}
+
+/// The term with its description, checked.
+fn finish(
+    observable: ExtensionObservable,
+    covariate: &str,
+    recordings: usize,
+    function: ExtensionFunction,
+    default: f64,
+    edge: Option<EdgeRefit>,
+) -> Result<FittedTerm, DiagnoseError> {
+    let term = ModelExtension {
+        observable,
+        covariate: covariate.to_string(),
+        function,
+        default,
+        description: format!(
+            "{} along {covariate:?}, fitted by murk diagnose on {recordings} recordings",
+            observable.name(),
+        ),
+    };
+    term.check()
+        .map_err(|r| DiagnoseError::Table(format!("fitted term is invalid: {r}")))?;
+    Ok(FittedTerm {
+        term,
+        edge,
+        intervals: Vec::new(),
+    })
+}
+
+/// Per-bin estimates of a term.
+struct BinsFit {
+    /// Per bin (`None`: too little data).
+    values: Vec<Option<f64>>,
+    /// The pooled value (the default).
+    default: f64,
+    /// Per bin: returns (survival trials, kept returns) or simulated
+    /// counts (count).
+    weights: Vec<f64>,
+    /// Per bin: the weighted mean of the covariate (NaN for categories).
+    means: Vec<f64>,
+    /// The soft edge re-fitted with a survival term.
+    edge: Option<EdgeRefit>,
+}
+
+fn fit_bins(
+    loaded: &Loaded,
+    table: &CoefficientTable,
+    evals: &[RecEval],
+    observable: ExtensionObservable,
+    covariate: &str,
+    binning: &Binning,
+    refit_edge: bool,
+) -> Result<BinsFit, DiagnoseError> {
     let nb = binning.len();
     let cell = |c: u32| loaded.cells[c as usize].expect("reference cell");
+    let mut weights = vec![0.0f64; nb];
+    let mut xsum = vec![0.0f64; nb];
     let mut edge = None;
     let (values, default): (Vec<Option<f64>>, f64) = match observable {
         ExtensionObservable::Survival => {
-            let (v, pooled, e) =
-                fit_survival(loaded, table, evals, covariate, binning, refit_edge)?;
+            let data = SurvivalData::new(loaded, table, evals, covariate, Some(binning))?;
+            for it in &data.items {
+                weights[it.bin] += it.trials;
+                xsum[it.bin] += it.trials * it.x;
+            }
+            let (v, pooled, e) = data.fit_bins(nb, refit_edge);
             edge = e;
             (v, pooled)
         }
@@ -159,11 +304,16 @@ pub fn fit_term_with_edge(
                     &e.intensity_residual
                 };
                 for (k, r) in rec.kept.iter().zip(res) {
-                    if let Some(b) = bin_of(binning, covariate, &cell(k.cell).cov, &rec.scan) {
+                    let cov = &cell(k.cell).cov;
+                    if let Some(b) = bin_of(binning, covariate, cov, &rec.scan) {
                         s[b].0 += r;
                         s[b].1 += 1.0;
+                        xsum[b] += x_of(covariate, cov, &rec.scan).unwrap_or(f64::NAN);
                     }
                 }
+            }
+            for (w, x) in weights.iter_mut().zip(&s) {
+                *w = x.1;
             }
             let tot = s.iter().fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
             let tf = |m: f64| {
@@ -215,7 +365,13 @@ pub fn fit_term_with_edge(
                 if let Some(b) = binning.of(v) {
                     s[b].0 += rec.near as f64 + 0.5;
                     s[b].1 += sim + 0.5;
+                    if let CovariateValue::Number(x) = v {
+                        xsum[b] += (sim + 0.5) * x;
+                    }
                 }
+            }
+            for (w, x) in weights.iter_mut().zip(&s) {
+                *w = x.1;
             }
             let tot = s.iter().fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
             let pooled = if tot.1 > 0.0 { tot.0 / tot.1 } else { 1.0 };
@@ -223,61 +379,85 @@ pub fn fit_term_with_edge(
             (v, pooled)
         }
     };
-    let values: Vec<f64> = values.into_iter().map(|v| v.unwrap_or(default)).collect();
-    let function = match binning {
-        Binning::Numeric { edges } => ExtensionFunction::Bins {
-            edges: edges.clone(),
-            values,
-        },
-        Binning::Categories { names } => ExtensionFunction::Categories {
-            values: names.iter().cloned().zip(values).collect(),
-        },
+    let means = match binning {
+        Binning::Numeric { .. } => xsum
+            .iter()
+            .zip(&weights)
+            .map(|(x, w)| if *w > 0.0 { x / w } else { f64::NAN })
+            .collect(),
+        Binning::Categories { .. } => vec![f64::NAN; nb],
     };
-    let term = ModelExtension {
-        observable,
-        covariate: covariate.to_string(),
-        function,
+    Ok(BinsFit {
+        values,
         default,
-        description: format!(
-            "{} along {covariate:?}, fitted by murk diagnose on {} recordings",
-            observable.name(),
-            evals.len()
-        ),
-    };
-    term.check()
-        .map_err(|r| DiagnoseError::Table(format!("fitted term is invalid: {r}")))?;
-    Ok(FittedTerm { term, edge })
+        weights,
+        means,
+        edge,
+    })
 }
 
-/// Per-bin survival factors (`None`: too few returns), the pooled factor,
-/// and the soft edge re-fitted with them.
-type SurvivalFit = (Vec<Option<f64>>, f64, Option<EdgeRefit>);
+/// One survival unit: a reference cell of one recording.
+#[derive(Debug, Clone, Copy)]
+struct Item {
+    /// Its bin (0 without a binning).
+    bin: usize,
+    /// Index of its recording's applier.
+    applier: usize,
+    /// Range, m.
+    r: f64,
+    /// Calibrated reflectivity.
+    rho: f64,
+    /// Kept returns.
+    kept: f64,
+    /// Trials.
+    trials: f64,
+    /// Factor of the terms the table already has.
+    base: f64,
+    /// The covariate's numeric value (NaN when it has none).
+    x: f64,
+    /// The recording's MOR.
+    mor: f64,
+}
 
-/// Per-bin survival factors (`None`: too few returns), the pooled factor,
-/// and the soft edge re-fitted with them when `refit_edge` (and the table
-/// has a soft edge).
-fn fit_survival(
-    loaded: &Loaded,
-    table: &CoefficientTable,
-    evals: &[RecEval],
-    covariate: &str,
-    binning: &Binning,
-    refit_edge: bool,
-) -> Result<SurvivalFit, DiagnoseError> {
-    let nb = binning.len();
-    let cell = |c: u32| loaded.cells[c as usize].expect("reference cell");
-    // (bin, applier index, r, ρ, kept, trials, factor of the terms the table
-    // already has), in recording order.
-    type Item = (usize, usize, f64, f64, f64, f64, f64);
-    let mut appliers = Vec::with_capacity(evals.len());
-    let mut items: Vec<Item> = Vec::new();
-    for e in evals {
-        let rec = &loaded.recs[e.rec];
-        appliers.push(applier(table, loaded, rec, false, 0)?);
-        let a = appliers.len() - 1;
-        for u in &rec.units {
-            let c = cell(u.cell);
-            if let Some(b) = bin_of(binning, covariate, &c.cov, &rec.scan) {
+/// The fit set's survival units under a table, for likelihood fits of a
+/// factor on the vanishing distance.
+struct SurvivalData {
+    appliers: Vec<murk_infer::Applier>,
+    items: Vec<Item>,
+    soft: bool,
+    eps0: f64,
+    pi0: f64,
+}
+
+impl SurvivalData {
+    /// Units of `evals` (those the binning places, when one is given).
+    fn new(
+        loaded: &Loaded,
+        table: &CoefficientTable,
+        evals: &[RecEval],
+        covariate: &str,
+        binning: Option<&Binning>,
+    ) -> Result<SurvivalData, DiagnoseError> {
+        let cell = |c: u32| loaded.cells[c as usize].expect("reference cell");
+        let mut appliers = Vec::with_capacity(evals.len());
+        let mut items: Vec<Item> = Vec::new();
+        for e in evals {
+            let rec = &loaded.recs[e.rec];
+            appliers.push(applier(table, loaded, rec, false, 0)?);
+            let a = appliers.len() - 1;
+            for u in &rec.units {
+                let c = cell(u.cell);
+                let bin = match binning {
+                    Some(b) => match bin_of(b, covariate, &c.cov, &rec.scan) {
+                        Some(k) => k,
+                        None => continue,
+                    },
+                    None => 0,
+                };
+                let x = x_of(covariate, &c.cov, &rec.scan).unwrap_or(f64::NAN);
+                if binning.is_none() && !x.is_finite() {
+                    continue;
+                }
                 let base = extension_value(
                     table,
                     loaded,
@@ -286,95 +466,86 @@ fn fit_survival(
                     &rec.scan,
                     rec.mor,
                 );
-                items.push((
-                    b,
-                    a,
-                    c.cov.range,
-                    c.cov.reflectivity,
-                    u.kept as f64,
-                    u.trials as f64,
+                items.push(Item {
+                    bin,
+                    applier: a,
+                    r: c.cov.range,
+                    rho: c.cov.reflectivity,
+                    kept: u.kept as f64,
+                    trials: u.trials as f64,
                     base,
-                ));
+                    x,
+                    mor: rec.mor,
+                });
             }
         }
+        let soft = crate::evaluate::has_soft_edge(table, loaded);
+        let (eps0, pi0) = table
+            .weathers
+            .get(&loaded.weather)
+            .and_then(|w| w.survival.as_ref())
+            .map_or((0.0, 0.0), |s| (s.dropout, s.residual));
+        Ok(SurvivalData {
+            appliers,
+            items,
+            soft,
+            eps0,
+            pi0,
+        })
     }
-    let soft = crate::evaluate::has_soft_edge(table, loaded);
-    let (eps0, pi0) = table
-        .weathers
-        .get(&loaded.weather)
-        .and_then(|w| w.survival.as_ref())
-        .map_or((0.0, 0.0), |s| (s.dropout, s.residual));
-    // Keep probability with distance factor f and the edge `e`: the width
-    // factor m through the applier's z at r' = fD + (r − fD)/m, then the
-    // edge's dropout and residual swapped for e's.
-    let prob = |it: &Item, f: f64, e: &EdgeRefit| -> f64 {
-        let &(_, a, r, rho, _, _, base) = it;
-        let ap = &appliers[a];
-        let f = base * f;
+
+    /// Keep probability with distance factor f and the edge `e`: the width
+    /// factor m through the applier's z at r' = fD + (r − fD)/m, then the
+    /// edge's dropout and residual swapped for e's.
+    fn prob(&self, it: &Item, f: f64, e: &EdgeRefit) -> f64 {
+        let ap = &self.appliers[it.applier];
+        let f = it.base * f;
         let m = e.width_factor;
         let r = if m == 1.0 {
-            r
+            it.r
         } else {
-            let d = ap.vanishing_distance_m(rho) * f;
-            d + (r - d) / m
+            let d = ap.vanishing_distance_m(it.rho) * f;
+            d + (it.r - d) / m
         };
-        let p = ap.survival_probability(r, rho, f, false);
-        let p = if soft && (e.dropout != eps0 || e.residual != pi0) {
-            let sf = (p - pi0) / (1.0 - eps0 - pi0);
+        let p = ap.survival_probability(r, it.rho, f, false);
+        let p = if self.soft && (e.dropout != self.eps0 || e.residual != self.pi0) {
+            let sf = (p - self.pi0) / (1.0 - self.eps0 - self.pi0);
             e.residual + (1.0 - e.dropout - e.residual) * sf
         } else {
             p
         };
         p.clamp(P_FLOOR, 1.0 - P_FLOOR)
-    };
-    let nll_item = |it: &Item, f: f64, e: &EdgeRefit| -> f64 {
-        let p = prob(it, f, e);
-        -(it.4 * p.ln() + (it.5 - it.4) * (1.0 - p).ln())
-    };
-    // Σ over `its` in fixed chunks (the same sum on any thread count).
-    let sum = |its: &[Item], g: &(dyn Fn(&Item) -> f64 + Sync)| -> f64 {
+    }
+
+    fn nll_item(&self, it: &Item, f: f64, e: &EdgeRefit) -> f64 {
+        let p = self.prob(it, f, e);
+        -(it.kept * p.ln() + (it.trials - it.kept) * (1.0 - p).ln())
+    }
+
+    /// Σ over `its` in fixed chunks (the same sum on any thread count).
+    fn sum(its: &[Item], g: &(dyn Fn(&Item) -> f64 + Sync)) -> f64 {
         use rayon::prelude::*;
         its.par_chunks(8192)
             .map(|c| c.iter().map(g).sum::<f64>())
             .collect::<Vec<f64>>()
             .iter()
             .sum()
-    };
-    let mut by_bin: Vec<Vec<Item>> = vec![Vec::new(); nb];
-    for it in &items {
-        by_bin[it.0].push(*it);
     }
-    let factors = |e: &EdgeRefit| -> (Vec<Option<f64>>, f64) {
-        let ml = |its: &[Item]| -> f64 {
-            golden(
-                |lf| sum(its, &|it| nll_item(it, lf.exp(), e)),
-                0.2f64.ln(),
-                5f64.ln(),
-            )
-            .exp()
-        };
-        let pooled = ml(&items);
-        let v = by_bin
-            .iter()
-            .map(|its| {
-                let n: f64 = its.iter().map(|i| i.5).sum();
-                (n >= MIN_TRIALS).then(|| ml(its))
-            })
-            .collect();
-        (v, pooled)
-    };
-    let mut e = EdgeRefit {
-        width_factor: 1.0,
-        dropout: eps0,
-        residual: pi0,
-    };
-    let (mut v, mut pooled) = factors(&e);
-    if !refit_edge || !soft {
-        return Ok((v, pooled, None));
+
+    /// The edge as the table has it.
+    fn edge0(&self) -> EdgeRefit {
+        EdgeRefit {
+            width_factor: 1.0,
+            dropout: self.eps0,
+            residual: self.pi0,
+        }
     }
-    for _ in 0..2 {
-        let fs: Vec<f64> = v.iter().map(|x| x.unwrap_or(pooled)).collect();
-        let total = |e: &EdgeRefit| sum(&items, &|it| nll_item(it, fs[it.0], e));
+
+    /// Re-fits the edge's width factor, residual and dropout with the
+    /// factor `fs` per item.
+    fn refit_edge(&self, e: EdgeRefit, fs: &(dyn Fn(&Item) -> f64 + Sync)) -> EdgeRefit {
+        let mut e = e;
+        let total = |e: &EdgeRefit| Self::sum(&self.items, &|it| self.nll_item(it, fs(it), e));
         e.width_factor = golden(
             |lm| {
                 total(&EdgeRefit {
@@ -388,10 +559,522 @@ fn fit_survival(
         .exp();
         e.residual = golden(|x| total(&EdgeRefit { residual: x, ..e }), 0.0, 0.5);
         e.dropout = golden(|x| total(&EdgeRefit { dropout: x, ..e }), 0.0, 0.5);
-        (v, pooled) = factors(&e);
+        e
     }
-    Ok((v, pooled, Some(e)))
+
+    /// Per-bin factors (`None`: too few returns), the pooled factor, and
+    /// the soft edge re-fitted with them when `refit_edge` (and the table
+    /// has a soft edge).
+    fn fit_bins(&self, nb: usize, refit_edge: bool) -> SurvivalFit {
+        let mut by_bin: Vec<Vec<Item>> = vec![Vec::new(); nb];
+        for it in &self.items {
+            by_bin[it.bin].push(*it);
+        }
+        let factors = |e: &EdgeRefit| -> (Vec<Option<f64>>, f64) {
+            let ml = |its: &[Item]| -> f64 {
+                golden(
+                    |lf| Self::sum(its, &|it| self.nll_item(it, lf.exp(), e)),
+                    0.2f64.ln(),
+                    5f64.ln(),
+                )
+                .exp()
+            };
+            let pooled = ml(&self.items);
+            let v = by_bin
+                .iter()
+                .map(|its| {
+                    let n: f64 = its.iter().map(|i| i.trials).sum();
+                    (n >= MIN_TRIALS).then(|| ml(its))
+                })
+                .collect();
+            (v, pooled)
+        };
+        let mut e = self.edge0();
+        let (mut v, mut pooled) = factors(&e);
+        if !refit_edge || !self.soft {
+            return (v, pooled, None);
+        }
+        for _ in 0..2 {
+            let fs: Vec<f64> = v.iter().map(|x| x.unwrap_or(pooled)).collect();
+            e = self.refit_edge(e, &|it| fs[it.bin]);
+            (v, pooled) = factors(&e);
+        }
+        (v, pooled, Some(e))
+    }
+
+    /// `k` of the factor `exp(−k·x/MOR)` by maximum likelihood, and the
+    /// soft edge re-fitted with it when `refit_edge`.
+    fn fit_attenuation(&self, refit_edge: bool) -> (f64, Option<EdgeRefit>) {
+        let ml = |e: &EdgeRefit| {
+            golden(
+                |k| {
+                    Self::sum(&self.items, &|it| {
+                        self.nll_item(it, (-k * it.x / it.mor).exp(), e)
+                    })
+                },
+                -ATTENUATION_K_MAX,
+                ATTENUATION_K_MAX,
+            )
+        };
+        let mut e = self.edge0();
+        let mut k = ml(&e);
+        if !refit_edge || !self.soft {
+            return (k, None);
+        }
+        for _ in 0..2 {
+            e = self.refit_edge(e, &|it| (-k * it.x / it.mor).exp());
+            k = ml(&e);
+        }
+        (k, Some(e))
+    }
 }
+
+/// Per-bin survival factors (`None`: too few returns), the pooled factor,
+/// and the soft edge re-fitted with them.
+type SurvivalFit = (Vec<Option<f64>>, f64, Option<EdgeRefit>);
+
+/// The bracket of `k` in `exp(−k·x/MOR)`, both signs.
+pub const ATTENUATION_K_MAX: f64 = 30.0;
+
+/// A shape a term can take (see the module docs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Shape {
+    /// Piecewise constant over the bins (or categories).
+    Bins,
+    /// Two values split at one of the bins' edges.
+    Step,
+    /// Isotonic, linear between the bins' centres.
+    Monotone,
+    /// `exp(−k·x/MOR)`.
+    Attenuation,
+    /// `a + b·x`.
+    Linear,
+    /// `a·x^b`.
+    Power,
+}
+
+impl Shape {
+    /// Its name in reports (`bins`, `step`, …).
+    pub fn name(self) -> &'static str {
+        match self {
+            Shape::Bins => "bins",
+            Shape::Step => "step",
+            Shape::Monotone => "monotone",
+            Shape::Attenuation => "attenuation",
+            Shape::Linear => "linear",
+            Shape::Power => "power",
+        }
+    }
+}
+
+/// The shapes tried for a term on `observable` binned as `binning`: bins
+/// always; for a numeric covariate with at least three bins step and
+/// monotone; the parametric forms that are defined for the observable
+/// (attenuation for factors that can be fitted by likelihood or on the log
+/// ratio: survival, intensity; linear for the range bias; power for range
+/// and intensity). Count keeps bins: its held-out error needs simulations,
+/// which each further shape would multiply.
+pub fn shapes(observable: ExtensionObservable, binning: &Binning) -> Vec<Shape> {
+    let Binning::Numeric { edges } = binning else {
+        return vec![Shape::Bins];
+    };
+    if observable == ExtensionObservable::Count {
+        return vec![Shape::Bins];
+    }
+    let mut v = vec![Shape::Bins];
+    if edges.len() >= 2 {
+        v.extend([Shape::Step, Shape::Monotone]);
+    }
+    v.extend(match observable {
+        ExtensionObservable::Survival => &[Shape::Attenuation][..],
+        ExtensionObservable::Intensity => &[Shape::Attenuation, Shape::Power][..],
+        ExtensionObservable::Range => &[Shape::Linear, Shape::Power][..],
+        ExtensionObservable::Count => &[][..],
+    });
+    v
+}
+
+/// Fits the term of `shape` on `observable` along `covariate` (`binning`
+/// for the piecewise shapes) from the fit-set evaluations `evals` under
+/// `table`, re-fitting the soft edge with a survival term when
+/// `refit_edge`. The parametric forms' intervals come from `bootstrap`
+/// resamples of the recordings seeded by `seed` (none when 0). The shapes
+/// of one fold share `cache` (pass one per fold and covariate). `None`
+/// when the shape cannot be fitted on these data (a power law without
+/// positive covariate values, no split with data on both sides).
+#[allow(clippy::too_many_arguments)]
+pub fn fit_shaped(
+    loaded: &Loaded,
+    table: &CoefficientTable,
+    evals: &[RecEval],
+    observable: ExtensionObservable,
+    covariate: &str,
+    binning: &Binning,
+    shape: Shape,
+    refit_edge: bool,
+    bootstrap: usize,
+    seed: u64,
+    cache: &mut ShapeCache,
+) -> Result<Option<FittedTerm>, DiagnoseError> {
+    let n = evals.len();
+    if matches!(shape, Shape::Bins | Shape::Step | Shape::Monotone) && cache.bins.is_none() {
+        cache.bins = Some(fit_bins(
+            loaded, table, evals, observable, covariate, binning, refit_edge,
+        )?);
+    }
+    match shape {
+        Shape::Bins => {
+            let fit = cache.bins.as_ref().expect("filled above");
+            bins_term(fit, observable, covariate, binning, n).map(Some)
+        }
+        Shape::Step | Shape::Monotone => {
+            let Binning::Numeric { edges } = binning else {
+                return Ok(None);
+            };
+            let fit = cache.bins.as_ref().expect("filled above");
+            let tf = |v: f64| {
+                if observable.multiplicative() {
+                    v.max(1e-9).ln()
+                } else {
+                    v
+                }
+            };
+            // Bins with data: (value on the fitting scale, weight, mean x).
+            let pts: Vec<(usize, f64, f64, f64)> = fit
+                .values
+                .iter()
+                .enumerate()
+                .filter_map(|(b, v)| {
+                    v.map(|v| (b, tf(v), fit.weights[b], fit.means[b]))
+                        .filter(|p| p.2 > 0.0 && p.3.is_finite())
+                })
+                .collect();
+            if shape == Shape::Step {
+                let Some(cut) = best_split(&pts) else {
+                    return Ok(None);
+                };
+                let one = Binning::Numeric {
+                    edges: vec![edges[cut - 1]],
+                };
+                let mut t = fit_term_with_edge(
+                    loaded, table, evals, observable, covariate, &one, refit_edge,
+                )?;
+                t.term.description =
+                    format!("{} (a step at {})", t.term.description, edges[cut - 1]);
+                return Ok(Some(t));
+            }
+            // Knots strictly ascending (bins are disjoint, so their means
+            // are; equal means are merged into the first).
+            let mut pts = pts;
+            pts.dedup_by(|b, a| !(b.3 > a.3));
+            if pts.len() < 2 {
+                return Ok(None);
+            }
+            let y: Vec<f64> = pts.iter().map(|p| p.1).collect();
+            let w: Vec<f64> = pts.iter().map(|p| p.2).collect();
+            let up = isotonic(&y, &w, true);
+            let down = isotonic(&y, &w, false);
+            let sse = |z: &[f64]| -> f64 {
+                z.iter()
+                    .zip(&y)
+                    .zip(&w)
+                    .map(|((a, b), w)| w * (a - b).powi(2))
+                    .sum()
+            };
+            let best = if sse(&up) <= sse(&down) { up } else { down };
+            let back = |v: f64| {
+                if observable.multiplicative() {
+                    v.exp()
+                } else {
+                    v
+                }
+            };
+            let function = ExtensionFunction::Monotone {
+                knots: pts.iter().map(|p| p.3).collect(),
+                values: best.into_iter().map(back).collect(),
+            };
+            finish(observable, covariate, n, function, fit.default, fit.edge).map(Some)
+        }
+        Shape::Attenuation | Shape::Linear | Shape::Power => fit_parametric(
+            loaded, table, evals, observable, covariate, shape, refit_edge, bootstrap, seed,
+        ),
+    }
+}
+
+/// The cut (index into the points, 1..len) of the weighted points'
+/// values into two groups with the least weighted squares.
+fn best_split(pts: &[(usize, f64, f64, f64)]) -> Option<usize> {
+    let ss = |g: &[(usize, f64, f64, f64)]| -> f64 {
+        let w: f64 = g.iter().map(|p| p.2).sum();
+        let m = g.iter().map(|p| p.2 * p.1).sum::<f64>() / w;
+        g.iter().map(|p| p.2 * (p.1 - m).powi(2)).sum()
+    };
+    (1..pts.len())
+        .map(|i| (i, ss(&pts[..i]) + ss(&pts[i..])))
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|(i, _)| pts[i].0)
+        .filter(|&b| b >= 1)
+}
+
+/// Weighted isotonic regression (pool adjacent violators), non-decreasing
+/// when `increasing`, else non-increasing.
+pub fn isotonic(y: &[f64], w: &[f64], increasing: bool) -> Vec<f64> {
+    let s = if increasing { 1.0 } else { -1.0 };
+    // Blocks: (weighted mean × s, weight, points).
+    let mut blocks: Vec<(f64, f64, usize)> = Vec::with_capacity(y.len());
+    for (&v, &wt) in y.iter().zip(w) {
+        blocks.push((s * v, wt, 1));
+        while blocks.len() >= 2 {
+            let (b, a) = (blocks[blocks.len() - 1], blocks[blocks.len() - 2]);
+            if a.0 <= b.0 {
+                break;
+            }
+            let wt = a.1 + b.1;
+            let m = (a.0 * a.1 + b.0 * b.1) / wt;
+            blocks.pop();
+            *blocks.last_mut().expect("two blocks") = (m, wt, a.2 + b.2);
+        }
+    }
+    blocks
+        .iter()
+        .flat_map(|&(m, _, k)| std::iter::repeat_n(s * m, k))
+        .collect()
+}
+
+/// Sums of one recording for a least-squares line `r = a + b·u` (or
+/// through the origin): `[n, Σu, Σu², Σr, Σur]`.
+type LineSums = [f64; 5];
+
+/// `(a, b)` of the least-squares line (`a` = 0 when `origin`).
+fn line_of(s: &LineSums, origin: bool) -> Option<(f64, f64)> {
+    let [n, su, suu, sr, sur] = *s;
+    if origin {
+        return (suu > 0.0).then(|| (0.0, sur / suu));
+    }
+    let det = n * suu - su * su;
+    (n > 1.0 && det > 1e-12 * n * suu.max(1e-300)).then(|| {
+        let b = (n * sur - su * sr) / det;
+        ((sr - b * su) / n, b)
+    })
+}
+
+/// Percentile 95 % intervals of `fit` over `b` resamples of the
+/// recordings' sums (with replacement, seeded by `seed`).
+fn bootstrap_lines(
+    per_rec: &[LineSums],
+    origin: bool,
+    b: usize,
+    seed: u64,
+) -> Option<[[f64; 2]; 2]> {
+    use rand::{RngExt, SeedableRng};
+    if b == 0 || per_rec.len() < 2 {
+        return None;
+    }
+    let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(seed);
+    let mut a_s = Vec::with_capacity(b);
+    let mut b_s = Vec::with_capacity(b);
+    for _ in 0..b {
+        let mut s = [0.0; 5];
+        for _ in 0..per_rec.len() {
+            let r = &per_rec[rng.random_range(0..per_rec.len())];
+            for (x, y) in s.iter_mut().zip(r) {
+                *x += y;
+            }
+        }
+        if let Some((a, bb)) = line_of(&s, origin) {
+            a_s.push(a);
+            b_s.push(bb);
+        }
+    }
+    if a_s.len() < b / 2 {
+        return None;
+    }
+    let pct = |mut v: Vec<f64>| -> [f64; 2] {
+        v.sort_by(f64::total_cmp);
+        let at = |q: f64| v[((q * (v.len() - 1) as f64).round() as usize).min(v.len() - 1)];
+        [at(0.025), at(0.975)]
+    };
+    Some([pct(a_s), pct(b_s)])
+}
+
+/// Bootstrap resamples for the parametric forms' intervals.
+pub const BOOTSTRAP: usize = 200;
+
+/// The parametric shapes (module docs).
+#[allow(clippy::too_many_arguments)]
+fn fit_parametric(
+    loaded: &Loaded,
+    table: &CoefficientTable,
+    evals: &[RecEval],
+    observable: ExtensionObservable,
+    covariate: &str,
+    shape: Shape,
+    refit_edge: bool,
+    bootstrap: usize,
+    seed: u64,
+) -> Result<Option<FittedTerm>, DiagnoseError> {
+    let n = evals.len();
+    let pooled_fit = |default: f64, function: ExtensionFunction, edge, intervals| {
+        finish(observable, covariate, n, function, default, edge).map(|mut t| {
+            t.intervals = intervals;
+            Some(t)
+        })
+    };
+    if observable == ExtensionObservable::Survival {
+        if shape != Shape::Attenuation {
+            return Ok(None);
+        }
+        let data = SurvivalData::new(loaded, table, evals, covariate, None)?;
+        if data.items.is_empty() {
+            return Ok(None);
+        }
+        let (k, edge) = data.fit_attenuation(refit_edge);
+        return pooled_fit(1.0, ExtensionFunction::Attenuation { k }, edge, vec![None]);
+    }
+    if !matches!(
+        observable,
+        ExtensionObservable::Range | ExtensionObservable::Intensity
+    ) {
+        return Ok(None);
+    }
+    // (recording, x, MOR, residual) of every kept return with a numeric x.
+    let cell = |c: u32| loaded.cells[c as usize].expect("reference cell");
+    let mut pts: Vec<(usize, f64, f64, f64)> = Vec::new();
+    for (ri, e) in evals.iter().enumerate() {
+        let rec = &loaded.recs[e.rec];
+        let res = if observable == ExtensionObservable::Range {
+            &e.range_residual
+        } else {
+            &e.intensity_residual
+        };
+        for (k, r) in rec.kept.iter().zip(res) {
+            if let Some(x) = x_of(covariate, &cell(k.cell).cov, &rec.scan) {
+                pts.push((ri, x, rec.mor, *r));
+            }
+        }
+    }
+    if pts.is_empty() {
+        return Ok(None);
+    }
+    let mean_r = pts.iter().map(|p| p.3).sum::<f64>() / pts.len() as f64;
+    let intensity = observable == ExtensionObservable::Intensity;
+    let default = if intensity { mean_r.exp() } else { mean_r };
+    // Least squares on a regressor u per point.
+    let lines = |u: &dyn Fn(f64, f64) -> Option<f64>| -> Vec<LineSums> {
+        let mut per = vec![[0.0; 5]; n];
+        for &(ri, x, mor, r) in &pts {
+            if let Some(u) = u(x, mor).filter(|u| u.is_finite()) {
+                let s = &mut per[ri];
+                s[0] += 1.0;
+                s[1] += u;
+                s[2] += u * u;
+                s[3] += r;
+                s[4] += u * r;
+            }
+        }
+        per
+    };
+    let total = |per: &[LineSums]| -> LineSums {
+        let mut s = [0.0; 5];
+        for r in per {
+            for (x, y) in s.iter_mut().zip(r) {
+                *x += y;
+            }
+        }
+        s
+    };
+    match (shape, intensity) {
+        (Shape::Attenuation, true) => {
+            // ln f = −k·x/MOR.
+            let per = lines(&|x, mor| Some(-x / mor));
+            let Some((_, k)) = line_of(&total(&per), true) else {
+                return Ok(None);
+            };
+            let iv = bootstrap_lines(&per, true, bootstrap, seed).map(|v| v[1]);
+            pooled_fit(
+                default,
+                ExtensionFunction::Attenuation { k },
+                None,
+                vec![iv],
+            )
+        }
+        (Shape::Power, true) => {
+            // ln f = ln a + b·ln x.
+            let per = lines(&|x, _| (x > 0.0).then(|| x.ln()));
+            let Some((la, b)) = line_of(&total(&per), false) else {
+                return Ok(None);
+            };
+            let iv = bootstrap_lines(&per, false, bootstrap, seed);
+            pooled_fit(
+                default,
+                ExtensionFunction::Power {
+                    scale: la.exp(),
+                    exponent: b,
+                },
+                None,
+                vec![iv.map(|v| [v[0][0].exp(), v[0][1].exp()]), iv.map(|v| v[1])],
+            )
+        }
+        (Shape::Linear, false) => {
+            let per = lines(&|x, _| Some(x));
+            let Some((a, b)) = line_of(&total(&per), false) else {
+                return Ok(None);
+            };
+            let iv = bootstrap_lines(&per, false, bootstrap, seed);
+            pooled_fit(
+                default,
+                ExtensionFunction::Linear {
+                    intercept: a,
+                    slope: b,
+                },
+                None,
+                vec![iv.map(|v| v[0]), iv.map(|v| v[1])],
+            )
+        }
+        (Shape::Power, false) => {
+            // r = a·x^b: `a` in closed form for each `b`, `b` by
+            // golden-section search on the squares.
+            let pos: Vec<(f64, f64)> = pts
+                .iter()
+                .filter(|p| p.1 > 0.0)
+                .map(|p| (p.1.ln(), p.3))
+                .collect();
+            if pos.len() < 2 {
+                return Ok(None);
+            }
+            let a_of = |b: f64| -> (f64, f64) {
+                let (mut sxy, mut sxx, mut syy) = (0.0, 0.0, 0.0);
+                for &(l, r) in &pos {
+                    let z = (b * l).exp();
+                    sxy += z * r;
+                    sxx += z * z;
+                    syy += r * r;
+                }
+                if sxx > 0.0 {
+                    (sxy / sxx, syy - sxy * sxy / sxx)
+                } else {
+                    (0.0, syy)
+                }
+            };
+            let b = golden(|b| a_of(b).1, -POWER_EXPONENT_MAX, POWER_EXPONENT_MAX);
+            let (a, _) = a_of(b);
+            pooled_fit(
+                default,
+                ExtensionFunction::Power {
+                    scale: a,
+                    exponent: b,
+                },
+                None,
+                vec![None, None],
+            )
+        }
+        _ => Ok(None),
+    }
+}
+
+/// The bracket of a power law's exponent (range bias).
+pub const POWER_EXPONENT_MAX: f64 = 3.0;
 
 /// The soft edge re-fitted with a survival term.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -406,6 +1089,45 @@ pub struct EdgeRefit {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn isotonic_pools_violators() {
+        let y = [1.0, 3.0, 2.0, 4.0];
+        let w = [1.0, 1.0, 1.0, 1.0];
+        assert_eq!(isotonic(&y, &w, true), vec![1.0, 2.5, 2.5, 4.0]);
+        let d = isotonic(&y, &w, false);
+        assert!(d.windows(2).all(|p| p[0] >= p[1]), "{d:?}");
+        // The weighted mean is kept.
+        assert!((d.iter().sum::<f64>() - 10.0).abs() < 1e-12);
+        assert_eq!(isotonic(&[2.0, 1.0], &[3.0, 1.0], true), vec![1.75, 1.75]);
+    }
+
+    #[test]
+    fn lines_and_their_bootstrap() {
+        // r = 0.5 − 2u exactly, over three recordings.
+        let per: Vec<LineSums> = (0..3)
+            .map(|k| {
+                let mut s = [0.0; 5];
+                for i in 0..10 {
+                    let u = (k * 10 + i) as f64 * 0.1;
+                    let r = 0.5 - 2.0 * u;
+                    s = [s[0] + 1.0, s[1] + u, s[2] + u * u, s[3] + r, s[4] + u * r];
+                }
+                s
+            })
+            .collect();
+        let mut t = [0.0; 5];
+        for s in &per {
+            for (a, b) in t.iter_mut().zip(s) {
+                *a += b;
+            }
+        }
+        let (a, b) = line_of(&t, false).unwrap();
+        assert!((a - 0.5).abs() < 1e-9 && (b + 2.0).abs() < 1e-9, "{a} {b}");
+        let iv = bootstrap_lines(&per, false, 50, 7).unwrap();
+        assert!(iv[1][0] <= -2.0 + 1e-9 && iv[1][1] >= -2.0 - 1e-9, "{iv:?}");
+        assert!(bootstrap_lines(&per[..1], false, 50, 7).is_none());
+    }
 
     #[test]
     fn golden_finds_a_minimum() {

@@ -145,6 +145,48 @@ pub struct Step {
     pub p_value: f64,
     /// Held-out recordings in the paired test.
     pub recordings: usize,
+    /// The term's shape, chosen on held-out recordings (`bins`, `step`,
+    /// `monotone`, `attenuation`, `linear`, `power`).
+    pub shape: String,
+    /// The parametric shape's parameters, fitted on every recording, with
+    /// 95 % intervals where a bootstrap over recordings gives one (empty
+    /// for the piecewise shapes).
+    pub parameters: Vec<ShapeParameter>,
+    /// Every shape tried for the term, with its held-out loss.
+    pub shapes: Vec<ShapeTried>,
+}
+
+/// A parameter of a step's term.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ShapeParameter {
+    /// Its name (`k`, `intercept`, `slope`, `scale`, `exponent`).
+    pub name: String,
+    /// Its value, fitted on every recording.
+    pub value: f64,
+    /// 95 % percentile interval of a bootstrap over recordings; absent
+    /// when the fit has no closed form to resample cheaply.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ci95: Option<[f64; 2]>,
+}
+
+/// One shape tried for a step's term.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ShapeTried {
+    /// The shape.
+    pub shape: String,
+    /// Its free parameters (most over the folds).
+    pub parameters: usize,
+    /// Mean per-recording loss on held-out recordings (the paired test's
+    /// loss: survival log loss per return, mean square range or log
+    /// intensity residual, |log count ratio|).
+    pub held_out_loss: f64,
+    /// One-sided p-value that the lowest-loss shape beats this one on
+    /// held-out recordings (absent for the lowest itself).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub p_worse_than_best: Option<f64>,
+    /// The shape kept: the fewest parameters among those not
+    /// significantly worse than the lowest.
+    pub chosen: bool,
 }
 
 /// A candidate term tested and turned down.

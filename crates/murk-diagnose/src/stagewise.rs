@@ -12,6 +12,11 @@
 //!    [`CANDIDATES_PER_STEP`]); fit each one's term per fold on the fit set
 //!    *on top of the current model* and evaluate the fold's held-out
 //!    recordings with it;
+//!    every [`extend::shapes`] of the term is fitted and evaluated so; the
+//!    shape kept is the one with the fewest parameters whose mean held-out
+//!    loss is not significantly above the lowest (paired sign-flip test
+//!    over held-out recordings, p ≥ α): a flexible shape must earn its
+//!    parameters out of sample (the penalty for parameters);
 //! 3. a candidate passes when a paired test over held-out recordings
 //!    ([`crate::attribution::paired_gain_test`] on the per-recording loss
 //!    before − after, [`recording_loss`]) gives p < α and its metric gains;
@@ -38,7 +43,8 @@ use murk_types::{CoefficientTable, ExtensionObservable};
 use crate::attribution::paired_gain_test;
 use crate::data::Loaded;
 use crate::evaluate::{Metrics, P_FLOOR, RecEval, SimOptions, evaluate};
-use crate::report::{Finding, Gain, Rejected, Step};
+use crate::extend::Shape;
+use crate::report::{Finding, Gain, Rejected, ShapeParameter, ShapeTried, Step};
 use crate::{
     Baseline, DiagnoseError, DiagnoseValidParams, Folds, Test, extend, rank, relative_gain, seed_of,
 };
@@ -116,6 +122,12 @@ struct Candidate {
     bins: usize,
     /// The soft edge re-fitted with a survival term (last fold).
     edge: Option<extend::EdgeRefit>,
+    /// The shape chosen on held-out recordings.
+    shape: Shape,
+    /// The term of the last fold (its parameters, for the words).
+    last_term: Option<murk_types::ModelExtension>,
+    /// Every shape tried, with its held-out loss.
+    shapes: Vec<ShapeTried>,
 }
 
 /// What the stagewise extension returns.
@@ -142,9 +154,27 @@ fn key(f: &Finding) -> Key {
 }
 
 /// The term of a step in words.
-pub(crate) fn term_text(obs: ExtensionObservable, covariate: &str, bins: usize) -> String {
+pub(crate) fn term_text(
+    obs: ExtensionObservable,
+    covariate: &str,
+    bins: usize,
+    term: Option<&murk_types::ModelExtension>,
+) -> String {
+    use murk_types::ExtensionFunction as F;
+    let shape = match term.map(|t| &t.function) {
+        Some(F::Bins { edges, .. }) if edges.len() == 1 && bins > 2 => {
+            format!("a step at {}", edges[0])
+        }
+        Some(F::Monotone { knots, .. }) => {
+            format!("monotone (isotonic) through {} knots", knots.len())
+        }
+        Some(F::Attenuation { k }) => format!("exp(−k·{covariate}/MOR), k = {k:.3}"),
+        Some(F::Linear { intercept, slope }) => format!("{intercept:.4} + {slope:.4}·{covariate}"),
+        Some(F::Power { scale, exponent }) => format!("{scale:.4}·{covariate}^{exponent:.3}"),
+        _ => format!("piecewise constant over {bins} bins"),
+    };
     format!(
-        "{} × f({covariate}) — piecewise constant over {bins} bins, fitted per fold on the fit set",
+        "{} × f({covariate}) — {shape}, fitted per fold on the fit set",
         match obs {
             ExtensionObservable::Survival => "vanishing distance",
             ExtensionObservable::Count if murk_types::COUNT_RAY_COVARIATES.contains(&covariate) => {
@@ -255,23 +285,40 @@ impl DiagnoseValidParams {
                 break;
             };
             let t = &tests[i];
-            full = self.with_full_term(loaded, &full, t, sim, fit_params)?;
+            let (table, fitted) =
+                self.with_full_term(loaded, &full, t, c.shape, sim, fit_params)?;
+            full = table;
+            let parameters = fitted
+                .term
+                .function
+                .parameters()
+                .into_iter()
+                .enumerate()
+                .map(|(j, (name, value))| ShapeParameter {
+                    name: name.to_string(),
+                    value,
+                    ci95: fitted.intervals.get(j).copied().flatten(),
+                })
+                .collect();
             steps.push(Step {
                 observable: t.observable,
                 covariate: t.covariate.clone(),
                 term: match c.edge {
                     Some(e) => format!(
                         "{}; the soft edge re-fitted with it (width × {:.3}, dropout {:.4}, residual {:.4} in the last fold)",
-                        term_text(t.observable, &t.covariate, c.bins),
+                        term_text(t.observable, &t.covariate, c.bins, c.last_term.as_ref()),
                         e.width_factor,
                         e.dropout,
                         e.residual
                     ),
-                    None => term_text(t.observable, &t.covariate, c.bins),
+                    None => term_text(t.observable, &t.covariate, c.bins, c.last_term.as_ref()),
                 },
                 gain: c.gain.clone().expect("an accepted candidate has a gain"),
                 p_value: c.p_value,
                 recordings: c.recordings,
+                shape: c.shape.name().to_string(),
+                parameters,
+                shapes: c.shapes.clone(),
             });
             accepted.push((round, (t.observable, t.covariate.clone())));
             tables = c.tables;
@@ -325,10 +372,29 @@ impl DiagnoseValidParams {
         // the current simulations.
         let count = t.observable == ExtensionObservable::Count;
         let with_sim = count.then_some(sim);
-        let mut new_tables = Vec::with_capacity(folds.k);
-        let mut new_evals = Vec::with_capacity(evals.len());
+        // Per shape: the fold's tables, held-out evaluations, whether
+        // every fold could fit it, and its last term.
+        struct Tried {
+            shape: Shape,
+            tables: Vec<CoefficientTable>,
+            evals: Vec<RecEval>,
+            ok: bool,
+            term: Option<extend::FittedTerm>,
+            parameters: usize,
+        }
+        let first_binning = self.extension_binning(loaded, &folds.fit_set(0), t);
+        let mut tried: Vec<Tried> = extend::shapes(t.observable, &first_binning)
+            .into_iter()
+            .map(|shape| Tried {
+                shape,
+                tables: Vec::with_capacity(folds.k),
+                evals: Vec::with_capacity(evals.len()),
+                ok: true,
+                term: None,
+                parameters: 0,
+            })
+            .collect();
         let mut bins = 0;
-        let mut edge = None;
         // A survival term re-fits the soft edge with it; the covariate must
         // add something beyond that re-fit: its paired test is against the
         // same fit with one bin (a constant factor and the re-fitted edge).
@@ -339,18 +405,42 @@ impl DiagnoseValidParams {
             let in_sample = evaluate(loaded, table, &fit_set, with_sim, fit_params)?;
             let binning = self.extension_binning(loaded, &fit_set, t);
             bins = binning.len();
-            let term = extend::fit_term_with_edge(
-                loaded,
-                table,
-                &in_sample,
-                t.observable,
-                &t.covariate,
-                &binning,
-                true,
-            )?;
-            edge = term.edge;
-            let mut ext = table.clone();
-            term.apply_to(&mut ext, p.weather);
+            let mut cache = extend::ShapeCache::default();
+            for tr in tried.iter_mut().filter(|tr| tr.ok) {
+                let Some(term) = extend::fit_shaped(
+                    loaded,
+                    table,
+                    &in_sample,
+                    t.observable,
+                    &t.covariate,
+                    &binning,
+                    tr.shape,
+                    true,
+                    0,
+                    0,
+                    &mut cache,
+                )?
+                else {
+                    tr.ok = false;
+                    continue;
+                };
+                let mut ext = table.clone();
+                term.apply_to(&mut ext, p.weather);
+                let mut held = evaluate(loaded, &ext, &folds.held_out(f), with_sim, fit_params)?;
+                if !count {
+                    for e in held.iter_mut() {
+                        if let Some(old) = evals.iter().find(|o| o.rec == e.rec) {
+                            e.near_sim = old.near_sim;
+                            e.near_bins_sim = old.near_bins_sim.clone();
+                            e.scene = old.scene;
+                        }
+                    }
+                }
+                tr.parameters = tr.parameters.max(term.term.function.parameter_count());
+                tr.evals.extend(held);
+                tr.tables.push(ext);
+                tr.term = Some(term);
+            }
             if survival {
                 // One bin along the recording's MOR, which every recording
                 // has: a constant factor.
@@ -373,21 +463,84 @@ impl DiagnoseValidParams {
                     fit_params,
                 )?);
             }
-            let mut held = evaluate(loaded, &ext, &folds.held_out(f), with_sim, fit_params)?;
-            if !count {
-                for e in held.iter_mut() {
-                    if let Some(old) = evals.iter().find(|o| o.rec == e.rec) {
-                        e.near_sim = old.near_sim;
-                        e.near_bins_sim = old.near_bins_sim.clone();
-                        e.scene = old.scene;
-                    }
-                }
-            }
-            new_evals.extend(held);
-            new_tables.push(ext);
         }
-        new_evals.sort_by_key(|e| e.rec);
         let obs = t.observable;
+        tried.retain(|tr| tr.ok);
+        for tr in tried.iter_mut() {
+            tr.evals.sort_by_key(|e| e.rec);
+        }
+        // The shape: the simplest (fewest parameters) whose held-out loss
+        // is not significantly above the lowest one's (paired test over
+        // held-out recordings): a more flexible shape must earn its
+        // parameters on recordings it was not fitted on.
+        let losses: Vec<Vec<Option<f64>>> = tried
+            .iter()
+            .map(|tr| {
+                tr.evals
+                    .iter()
+                    .map(|e| recording_loss_of(loaded, e, obs, &t.covariate))
+                    .collect()
+            })
+            .collect();
+        let mean_loss = |l: &[Option<f64>]| -> f64 {
+            let v: Vec<f64> = l.iter().flatten().copied().collect();
+            if v.is_empty() {
+                f64::INFINITY
+            } else {
+                v.iter().sum::<f64>() / v.len() as f64
+            }
+        };
+        let means: Vec<f64> = losses.iter().map(|l| mean_loss(l)).collect();
+        let best = (0..tried.len())
+            .min_by(|&a, &b| means[a].total_cmp(&means[b]))
+            .expect("bins always fit");
+        let p_worse: Vec<f64> = (0..tried.len())
+            .map(|s| {
+                if s == best {
+                    return 1.0;
+                }
+                let d: Vec<f64> = losses[s]
+                    .iter()
+                    .zip(&losses[best])
+                    .filter_map(|(a, b)| Some((*a)? - (*b)?))
+                    .collect();
+                let seed = seed_of(
+                    p.seed,
+                    Purpose::DiagnoseTest,
+                    &[
+                        "shape",
+                        obs.name(),
+                        &t.covariate,
+                        &round.to_string(),
+                        tried[s].shape.name(),
+                    ],
+                );
+                paired_gain_test(&d, p.permutations, seed)
+            })
+            .collect();
+        let chosen = (0..tried.len())
+            .filter(|&s| s == best || p_worse[s] >= p.alpha)
+            .min_by_key(|&s| (tried[s].parameters, tried[s].shape))
+            .expect("the best shape qualifies");
+        let shapes_tried: Vec<ShapeTried> = tried
+            .iter()
+            .enumerate()
+            .map(|(s, tr)| ShapeTried {
+                shape: tr.shape.name().to_string(),
+                parameters: tr.parameters,
+                held_out_loss: means[s],
+                p_worse_than_best: (s != best).then_some(p_worse[s]),
+                chosen: s == chosen,
+            })
+            .collect();
+        let Tried {
+            shape,
+            tables: new_tables,
+            evals: new_evals,
+            term: last,
+            ..
+        } = tried.swap_remove(chosen);
+        let edge = last.as_ref().and_then(|t| t.edge);
         null_evals.sort_by_key(|e| e.rec);
         let reference = if survival { &null_evals } else { evals };
         let d: Vec<f64> = reference
@@ -416,34 +569,57 @@ impl DiagnoseValidParams {
             recordings: d.len(),
             bins,
             edge,
+            shape,
+            last_term: last.map(|t| t.term),
+            shapes: shapes_tried,
         })
     }
 
-    /// `full` with `t`'s term fitted on every recording on top of it.
+    /// `full` with `t`'s term of `shape` fitted on every recording on top
+    /// of it, and the term (with its parameters' bootstrap intervals over
+    /// recordings).
     fn with_full_term(
         &self,
         loaded: &Loaded,
         full: &CoefficientTable,
         t: &Test,
+        shape: Shape,
         sim: &SimOptions,
         fit_params: &FitValidParams,
-    ) -> Result<CoefficientTable, DiagnoseError> {
+    ) -> Result<(CoefficientTable, extend::FittedTerm), DiagnoseError> {
         let all: Vec<usize> = (0..loaded.recs.len()).collect();
         let with_sim = (t.observable == ExtensionObservable::Count).then_some(sim);
         let in_sample = evaluate(loaded, full, &all, with_sim, fit_params)?;
         let binning = self.extension_binning(loaded, &all, t);
-        let term = extend::fit_term_with_edge(
-            loaded,
-            full,
-            &in_sample,
-            t.observable,
-            &t.covariate,
-            &binning,
-            true,
-        )?;
+        let seed = seed_of(
+            self.0.seed,
+            Purpose::Bootstrap,
+            &["shape", t.observable.name(), &t.covariate],
+        );
+        let mut cache = extend::ShapeCache::default();
+        let mut fit = |shape| {
+            extend::fit_shaped(
+                loaded,
+                full,
+                &in_sample,
+                t.observable,
+                &t.covariate,
+                &binning,
+                shape,
+                true,
+                extend::BOOTSTRAP,
+                seed,
+                &mut cache,
+            )
+        };
+        // The shape fitted in every fold fits on all of them; bins always do.
+        let term = match fit(shape)? {
+            Some(term) => term,
+            None => fit(Shape::Bins)?.expect("bins always fit"),
+        };
         let mut table = full.clone();
         term.apply_to(&mut table, self.0.weather);
-        Ok(table)
+        Ok((table, term))
     }
 }
 

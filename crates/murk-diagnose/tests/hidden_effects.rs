@@ -228,9 +228,12 @@ fn intensity_along_range_two_way_attenuation_in_fog() {
         )],
         14,
     );
-    // exp(−2k·r/MOR) reads range and MOR: piecewise-constant terms need one
-    // along each (the parametric form is issue #13 item 4).
-    expect_top_steps(&d, "intensity", "range", 0.05, &["range", "mor"]);
+    // exp(−2k·r/MOR) reads range and MOR: its own form (the attenuation
+    // shape, issue #13 item 4) takes both in one term along range, where
+    // piecewise-constant terms needed one along each.
+    expect_top_steps(&d, "intensity", "range", 0.05, &["range"]);
+    assert_eq!(d.report.steps.len(), 1, "{:#?}", d.report.steps);
+    assert_eq!(d.report.steps[0].shape, "attenuation");
     assert!(d.report.top().unwrap().cause.contains("two-way"));
 }
 

@@ -3,8 +3,9 @@
 //!
 //! The baseline model of a weather (vanishing slopes, soft edge, near-range
 //! laws) knows range, reflectivity and MOR. An extension makes one part of it
-//! depend on one more variable, as a piecewise-constant function fitted on
-//! measured recordings:
+//! depend on one more variable, as a function fitted on measured recordings
+//! ([`ExtensionFunction`]: piecewise constant, monotone, or a named
+//! parametric form such as two-way attenuation `exp(−k·r/MOR)`):
 //!
 //! | observable | the function's value `f` is | neutral |
 //! |---|---|---|
@@ -93,7 +94,11 @@ impl ExtensionObservable {
     }
 }
 
-/// A piecewise-constant function of the covariate.
+/// A function of the covariate (and, for [`ExtensionFunction::Attenuation`],
+/// the MOR): piecewise constant (`bins`, `categories`, the shapes of the
+/// first terms), monotone and piecewise linear, or one of the named
+/// parametric forms. Tables written before the other shapes existed hold
+/// only `bins` and `categories` and load unchanged.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum ExtensionFunction {
@@ -111,6 +116,126 @@ pub enum ExtensionFunction {
         /// Value per category.
         values: BTreeMap<String, f64>,
     },
+    /// Numeric covariate, monotone (isotonic regression): linear
+    /// interpolation between `(knots[i], values[i])`, constant beyond the
+    /// first and last knot.
+    Monotone {
+        /// Knots, strictly ascending.
+        knots: Vec<f64>,
+        /// Value at each knot (monotone; one per knot).
+        values: Vec<f64>,
+    },
+    /// Two-way attenuation `exp(−k·x / MOR)` of a factor (survival,
+    /// count, intensity; not the range bias): for `intensity` along
+    /// `range` this is Beer–Lambert extinction `exp(−2αr)` with
+    /// `α = (k/2)/MOR` (Koschmieder's 5 % contrast gives `α = ln 20/MOR`,
+    /// `k = 2·ln 20 ≈ 5.99`). Without a positive MOR it is the default.
+    Attenuation {
+        /// The rate `k` (dimensionless).
+        k: f64,
+    },
+    /// `intercept + slope·x` (a factor is floored at 0): a slope modulated
+    /// by the covariate, or a bias that grows with it.
+    Linear {
+        /// Value at x = 0.
+        intercept: f64,
+        /// Change per unit of x.
+        slope: f64,
+    },
+    /// `scale·x^exponent` for x > 0 (the default otherwise): along `mor`, a
+    /// range bias growing as MOR falls (`exponent` < 0), or a vanishing
+    /// distance that bends with MOR.
+    Power {
+        /// Value at x = 1.
+        scale: f64,
+        /// Exponent.
+        exponent: f64,
+    },
+}
+
+impl ExtensionFunction {
+    /// The shape's name as written in the table and reports (`bins`,
+    /// `categories`, `monotone`, `attenuation`, `linear`, `power`).
+    pub fn kind(&self) -> &'static str {
+        match self {
+            ExtensionFunction::Bins { .. } => "bins",
+            ExtensionFunction::Categories { .. } => "categories",
+            ExtensionFunction::Monotone { .. } => "monotone",
+            ExtensionFunction::Attenuation { .. } => "attenuation",
+            ExtensionFunction::Linear { .. } => "linear",
+            ExtensionFunction::Power { .. } => "power",
+        }
+    }
+
+    /// Free parameters: one per value and per edge or knot of the
+    /// piecewise shapes, one per category, the parametric forms' own.
+    pub fn parameter_count(&self) -> usize {
+        match self {
+            ExtensionFunction::Bins { edges, values } => edges.len() + values.len(),
+            ExtensionFunction::Categories { values } => values.len(),
+            ExtensionFunction::Monotone { knots, values } => knots.len() + values.len(),
+            ExtensionFunction::Attenuation { .. } => 1,
+            ExtensionFunction::Linear { .. } | ExtensionFunction::Power { .. } => 2,
+        }
+    }
+
+    /// The named parameters of a parametric form (empty for the
+    /// piecewise shapes).
+    pub fn parameters(&self) -> Vec<(&'static str, f64)> {
+        match *self {
+            ExtensionFunction::Attenuation { k } => vec![("k", k)],
+            ExtensionFunction::Linear { intercept, slope } => {
+                vec![("intercept", intercept), ("slope", slope)]
+            }
+            ExtensionFunction::Power { scale, exponent } => {
+                vec![("scale", scale), ("exponent", exponent)]
+            }
+            _ => Vec::new(),
+        }
+    }
+
+    /// True when the function takes a number (every shape but
+    /// `categories`).
+    pub fn is_numeric(&self) -> bool {
+        !matches!(self, ExtensionFunction::Categories { .. })
+    }
+
+    /// The value at the number `x` and MOR `mor_m` (`None`: the
+    /// function cannot say, and the term's default applies).
+    fn at(&self, x: f64, mor_m: f64) -> Option<f64> {
+        if !x.is_finite() {
+            return None;
+        }
+        let v = match self {
+            ExtensionFunction::Bins { edges, values } => values[edges.partition_point(|e| *e <= x)],
+            ExtensionFunction::Categories { .. } => return None,
+            ExtensionFunction::Monotone { knots, values } => {
+                let i = knots.partition_point(|k| *k <= x);
+                if i == 0 {
+                    values[0]
+                } else if i == knots.len() {
+                    values[i - 1]
+                } else {
+                    let t = (x - knots[i - 1]) / (knots[i] - knots[i - 1]);
+                    values[i - 1] + t * (values[i] - values[i - 1])
+                }
+            }
+            ExtensionFunction::Attenuation { k } => {
+                if !(mor_m.is_finite() && mor_m > 0.0) {
+                    return None;
+                }
+                (-k * x / mor_m).exp()
+            }
+            ExtensionFunction::Linear { intercept, slope } => intercept + slope * x,
+            ExtensionFunction::Power { scale, exponent } => {
+                if x <= 0.0 {
+                    return None;
+                }
+                scale * x.powf(*exponent)
+            }
+        };
+        v.is_finite().then_some(v)
+    }
 }
 
 /// A value of a scan-level covariate.
@@ -208,6 +333,12 @@ impl ModelExtension {
         if self.covariate.trim().is_empty() {
             return Err("covariate is empty".into());
         }
+        let finite = |what: &str, v: &[f64]| -> Result<(), String> {
+            match v.iter().find(|e| !e.is_finite()) {
+                Some(e) => Err(format!("{what} {e} is not finite")),
+                None => Ok(()),
+            }
+        };
         let values: Vec<f64> = match &self.function {
             ExtensionFunction::Bins { edges, values } => {
                 if values.len() != edges.len() + 1 {
@@ -217,15 +348,50 @@ impl ModelExtension {
                         edges.len()
                     ));
                 }
-                if let Some(e) = edges.iter().find(|e| !e.is_finite()) {
-                    return Err(format!("edge {e} is not finite"));
-                }
+                finite("edge", edges)?;
                 if edges.windows(2).any(|w| !(w[0] < w[1])) {
                     return Err("edges are not strictly ascending".into());
                 }
                 values.clone()
             }
             ExtensionFunction::Categories { values } => values.values().copied().collect(),
+            ExtensionFunction::Monotone { knots, values } => {
+                if knots.is_empty() || values.len() != knots.len() {
+                    return Err(format!(
+                        "{} values for {} knots (need one value per knot, at least one)",
+                        values.len(),
+                        knots.len()
+                    ));
+                }
+                finite("knot", knots)?;
+                if knots.windows(2).any(|w| !(w[0] < w[1])) {
+                    return Err("knots are not strictly ascending".into());
+                }
+                let up = values.windows(2).all(|w| w[0] <= w[1]);
+                let down = values.windows(2).all(|w| w[0] >= w[1]);
+                if !(up || down) {
+                    return Err("values at the knots are not monotone".into());
+                }
+                values.clone()
+            }
+            ExtensionFunction::Attenuation { k } => {
+                finite("k", &[*k])?;
+                if !self.observable.multiplicative() {
+                    return Err(format!(
+                        "attenuation is a factor; {} takes a bias",
+                        self.observable.name()
+                    ));
+                }
+                Vec::new()
+            }
+            ExtensionFunction::Linear { intercept, slope } => {
+                finite("parameter", &[*intercept, *slope])?;
+                Vec::new()
+            }
+            ExtensionFunction::Power { scale, exponent } => {
+                finite("parameter", &[*scale, *exponent])?;
+                vec![*scale]
+            }
         };
         for v in values.iter().chain(std::iter::once(&self.default)) {
             if !v.is_finite() {
@@ -263,17 +429,19 @@ impl ModelExtension {
         } else {
             scan.get(&self.covariate).cloned()
         };
-        self.value_of(x.as_ref())
+        self.value_at(x.as_ref(), mor_m)
     }
 
-    /// The function's value at a covariate value (`None`: unknown).
+    /// The function's value at a covariate value (`None`: unknown) with the
+    /// MOR unknown (a function of the MOR gives the default).
     pub fn value_of(&self, x: Option<&CovariateValue>) -> f64 {
-        match (&self.function, x) {
-            (ExtensionFunction::Bins { edges, values }, Some(CovariateValue::Number(x)))
-                if x.is_finite() =>
-            {
-                values[edges.partition_point(|e| e <= x)]
-            }
+        self.value_at(x, f64::NAN)
+    }
+
+    /// The function's value at a covariate value (`None`: unknown) and the
+    /// MOR `mor_m`, metres. A factor is never negative.
+    pub fn value_at(&self, x: Option<&CovariateValue>, mor_m: f64) -> f64 {
+        let v = match (&self.function, x) {
             (ExtensionFunction::Categories { values }, Some(CovariateValue::Text(t))) => {
                 values.get(t).copied().unwrap_or(self.default)
             }
@@ -282,7 +450,13 @@ impl ModelExtension {
                 .find(|(k, _)| k.trim().parse::<f64>().ok() == Some(*x))
                 .map(|(_, v)| *v)
                 .unwrap_or(self.default),
+            (f, Some(CovariateValue::Number(x))) => f.at(*x, mor_m).unwrap_or(self.default),
             _ => self.default,
+        };
+        if self.observable.multiplicative() {
+            v.max(0.0)
+        } else {
+            v
         }
     }
 }
@@ -505,5 +679,146 @@ mod tests {
         assert_eq!(combine(ExtensionObservable::Survival, [0.5, 0.5]), 0.25);
         assert_eq!(combine(ExtensionObservable::Range, [0.5, 0.5]), 1.0);
         assert_eq!(combine(ExtensionObservable::Count, []), 1.0);
+    }
+    fn term(observable: ExtensionObservable, function: ExtensionFunction) -> ModelExtension {
+        ModelExtension {
+            observable,
+            covariate: "range".into(),
+            function,
+            default: observable.neutral(),
+            description: String::new(),
+        }
+    }
+
+    #[test]
+    fn monotone_interpolates_and_holds_its_ends() {
+        let e = term(
+            ExtensionObservable::Survival,
+            ExtensionFunction::Monotone {
+                knots: vec![10.0, 20.0, 40.0],
+                values: vec![1.0, 0.8, 0.4],
+            },
+        );
+        assert!(e.check().is_ok());
+        let v = |x: f64| e.value_of(Some(&CovariateValue::Number(x)));
+        assert_eq!((v(0.0), v(10.0), v(40.0), v(99.0)), (1.0, 1.0, 0.4, 0.4));
+        assert!((v(15.0) - 0.9).abs() < 1e-12);
+        assert!((v(30.0) - 0.6).abs() < 1e-12);
+        let mut bad = e.clone();
+        bad.function = ExtensionFunction::Monotone {
+            knots: vec![10.0, 20.0, 40.0],
+            values: vec![1.0, 0.8, 0.9],
+        };
+        assert!(bad.check().unwrap_err().contains("monotone"));
+        bad.function = ExtensionFunction::Monotone {
+            knots: vec![10.0, 10.0],
+            values: vec![1.0, 0.8],
+        };
+        assert!(bad.check().unwrap_err().contains("ascending"));
+        bad.function = ExtensionFunction::Monotone {
+            knots: vec![],
+            values: vec![],
+        };
+        assert!(bad.check().is_err());
+    }
+
+    #[test]
+    fn attenuation_reads_the_mor_and_is_a_factor_only() {
+        let e = term(
+            ExtensionObservable::Intensity,
+            ExtensionFunction::Attenuation {
+                k: 2.0 * 20f64.ln(),
+            },
+        );
+        assert!(e.check().is_ok());
+        let p = PointCovariates::of_point(30.0, 0.0, 0.0, 20.0, 3);
+        // Two-way extinction at α = ln 20 / MOR over 30 m at MOR 60 m:
+        // exp(−2·ln 20·0.5) = 1/20.
+        let v = e.value(Some(&p), &BTreeMap::new(), 60.0);
+        assert!((v - 0.05).abs() < 1e-12, "{v}");
+        // No MOR: the default.
+        assert_eq!(e.value_of(Some(&CovariateValue::Number(30.0))), 1.0);
+        assert_eq!(e.value(Some(&p), &BTreeMap::new(), 0.0), 1.0);
+        let r = term(
+            ExtensionObservable::Range,
+            ExtensionFunction::Attenuation { k: 1.0 },
+        );
+        assert!(r.check().unwrap_err().contains("factor"));
+        assert!(
+            term(
+                ExtensionObservable::Intensity,
+                ExtensionFunction::Attenuation { k: f64::NAN }
+            )
+            .check()
+            .is_err()
+        );
+    }
+
+    #[test]
+    fn linear_and_power_forms() {
+        let mut e = term(
+            ExtensionObservable::Range,
+            ExtensionFunction::Linear {
+                intercept: 0.1,
+                slope: -0.01,
+            },
+        );
+        let v = |e: &ModelExtension, x: f64| e.value_of(Some(&CovariateValue::Number(x)));
+        assert!((v(&e, 20.0) + 0.1).abs() < 1e-12);
+        // A factor is floored at 0.
+        e.observable = ExtensionObservable::Survival;
+        assert_eq!(v(&e, 20.0), 0.0);
+        let mut p = term(
+            ExtensionObservable::Range,
+            ExtensionFunction::Power {
+                scale: 2.0,
+                exponent: -1.0,
+            },
+        );
+        p.covariate = "mor".into();
+        assert!(p.check().is_ok());
+        assert!((p.value(None, &BTreeMap::new(), 40.0) - 0.05).abs() < 1e-12);
+        // x ≤ 0: the default.
+        assert_eq!(v(&p, 0.0), 0.0);
+        p.observable = ExtensionObservable::Survival;
+        p.function = ExtensionFunction::Power {
+            scale: -1.0,
+            exponent: 1.0,
+        };
+        assert!(p.check().unwrap_err().contains("negative"));
+    }
+
+    #[test]
+    fn every_shape_round_trips_and_old_terms_load() {
+        let old = r#"{"observable":"survival","covariate":"elevation","function":{"kind":"bins","edges":[-4.0],"values":[0.8,1.0]},"default":1.0}"#;
+        let e: ModelExtension = serde_json::from_str(old).unwrap();
+        assert_eq!(e.function.kind(), "bins");
+        assert_eq!(e.function.parameter_count(), 3);
+        for f in [
+            ExtensionFunction::Monotone {
+                knots: vec![1.0, 2.0],
+                values: vec![0.5, 0.7],
+            },
+            ExtensionFunction::Attenuation { k: 6.0 },
+            ExtensionFunction::Linear {
+                intercept: 1.0,
+                slope: 0.5,
+            },
+            ExtensionFunction::Power {
+                scale: 1.0,
+                exponent: 0.5,
+            },
+        ] {
+            let t = term(ExtensionObservable::Intensity, f);
+            let s = serde_json::to_string(&t).unwrap();
+            assert!(
+                s.contains(&format!("\"kind\":\"{}\"", t.function.kind())),
+                "{s}"
+            );
+            let back: ModelExtension = serde_json::from_str(&s).unwrap();
+            assert_eq!(back, t);
+        }
+        let bad = r#"{"observable":"intensity","covariate":"range","function":{"kind":"attenuation","k":1.0,"q":2},"default":1.0}"#;
+        assert!(serde_json::from_str::<ModelExtension>(bad).is_err());
     }
 }

@@ -145,11 +145,25 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         );
     }
     for (i, st) in r.steps.iter().enumerate() {
+        let params: Vec<String> = st
+            .parameters
+            .iter()
+            .map(|p| match p.ci95 {
+                Some([lo, hi]) => format!("{} = {:.4} ({:.4}–{:.4})", p.name, p.value, lo, hi),
+                None => format!("{} = {:.4}", p.name, p.value),
+            })
+            .collect();
+        let shape = if params.is_empty() {
+            st.shape.clone()
+        } else {
+            format!("{} {}", st.shape, params.join(", "))
+        };
         outln!(
-            "step {}: {} along {:?}: {} {:.4} → {:.4} on held-out recordings ({:+.1} %, paired p {:.4})",
+            "step {}: {} along {:?} [{}]: {} {:.4} → {:.4} on held-out recordings ({:+.1} %, paired p {:.4})",
             i + 1,
             st.observable,
             st.covariate,
+            shape,
             st.gain.metric,
             st.gain.before,
             st.gain.after,
