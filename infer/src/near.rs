@@ -309,11 +309,11 @@ pub(crate) fn add_near_range(
 /// Normalised cumulative sums of `w` (`None` when empty or all zero: the
 /// draw is then uniform).
 ///
-/// Not `rand_distr::weighted::WeightedIndex`, on purpose: the weighted draw
-/// reads the same single uniform (`ring_u`, or one `random()` for the
-/// azimuth bin) that the uniform draw reads, so every later draw of a
-/// return (distance, reflectivity, pick, time) stays where it was, and a
-/// table without count terms keeps its stream byte for byte.
+/// Not `rand_distr::weighted::WeightedIndex`, on purpose: the ring's
+/// weighted draw inverts the same uniform `ring_u` the uniform draw reads
+/// (drawn before, for every return), so the rings follow the terms without
+/// moving any other draw of the stream; the code without count terms is the
+/// old path, untouched, so such tables keep their outputs byte for byte.
 fn cumulative(w: &[f64]) -> Option<Vec<f64>> {
     let total: f64 = w.iter().sum();
     if w.is_empty() || !(total > 0.0 && total.is_finite()) {
