@@ -301,6 +301,9 @@ impl ClearReference {
         let mut e_r = vec![0f32; total];
         let mut e_f = vec![0f32; total];
         let mut e_h = vec![0u32; total];
+        // The entry of each image cell, in image order (recording by
+        // recording), for the leave-one-out pass.
+        let mut entry_of = Vec::with_capacity(total);
         for (ri, img) in images.iter().enumerate() {
             for j in 0..img.cells.len() {
                 let c = img.cells[j] as usize;
@@ -309,6 +312,7 @@ impl ClearReference {
                 e_r[k] = img.range[j];
                 e_f[k] = img.reflectivity[j];
                 e_h[k] = img.hits[j];
+                entry_of.push(k as u32);
                 fill[c] += 1;
             }
         }
@@ -327,14 +331,17 @@ impl ClearReference {
             frames: frames.clone(),
         };
         let min_presence = params.reference_min_presence();
-        // A recording left out of a cell it did not hit is scored on it when
-        // the cell stays present without it; the share is judged for a
-        // recording of average length (exact when all have equal lengths).
-        let mean_frames = all_frames as f64 / n as f64;
-        // Sum of h over cells that a recording *missing* from the cell would
-        // still be scored on (leave-one-out presence holds without it).
-        let mut missing_total = 0u64;
-        let mut member_missing_total = vec![0u64; n];
+        // What the leave-one-out pass needs per cell: stable, its median and
+        // expected hits per scan, its hit sum; per entry, the cell's median
+        // without that entry's recording (NaN when no other recording hit
+        // the cell).
+        let mut loo_cells = LooCells {
+            stable: vec![false; n_cells],
+            median: vec![f32::NAN; n_cells],
+            h: vec![0; n_cells],
+            hit_sum: vec![0; n_cells],
+            median_without: vec![f32::NAN; total],
+        };
         let mut order: Vec<usize> = Vec::new();
         let mut rs: Vec<f32> = Vec::new();
         let mut fs: Vec<f32> = Vec::new();
@@ -368,10 +375,7 @@ impl ClearReference {
             hs.sort_unstable();
             let h = hs[(m - 1) / 2].max(1);
             let hit_sum: u64 = e_h[a..b].iter().map(|&x| x as u64).sum();
-            let share = |frames_without: f64, hits_without: f64| -> bool {
-                frames_without > 0.0 && hits_without >= min_presence * h as f64 * frames_without
-            };
-            if stable && share(all_frames as f64, hit_sum as f64) {
+            if stable && presence_holds(min_presence, h, all_frames as f64, hit_sum as f64) {
                 fs.clear();
                 fs.extend_from_slice(&e_f[a..b]);
                 reference.range[c] = med;
@@ -379,46 +383,26 @@ impl ClearReference {
                 reference.hits[c] = h.min(u16::MAX as u32) as u16;
                 reference.present.push(c as u32);
             }
-            if !stable || n < 2 {
-                continue;
-            }
-            // Leave-one-out: members of the cell.
+            loo_cells.stable[c] = stable;
+            loo_cells.median[c] = med;
+            loo_cells.h[c] = h;
+            loo_cells.hit_sum[c] = hit_sum;
             if m >= 2 {
                 for (pos, &i) in order.iter().enumerate() {
-                    let rec = e_rec[a + i] as usize;
-                    let f = frames[rec];
-                    let eh = e_h[a + i] as u64;
-                    if !share((all_frames - f) as f64, (hit_sum - eh) as f64) {
-                        continue;
-                    }
-                    let med_loo = median_without(&rs, pos);
-                    let tol = params.pairing_tolerance(med_loo as f64) as f32;
-                    let expected = h as u64 * f;
-                    let kept = if (e_r[a + i] - med_loo).abs() <= tol {
-                        eh.min(expected)
-                    } else {
-                        0
-                    };
-                    reference.loo[rec].0 += kept;
-                    reference.loo[rec].1 += expected;
-                    reference.cell_loo[c].0 += kept;
-                    reference.cell_loo[c].1 += expected;
+                    loo_cells.median_without[a + i] = median_without(&rs, pos);
                 }
-            }
-            // Non-members: the cell stays in their reference when its share
-            // holds without them; they lost all h returns of every scan.
-            if share(all_frames as f64 - mean_frames, hit_sum as f64) {
-                missing_total += h as u64;
-                let mut member_frames = 0u64;
-                for i in 0..m {
-                    member_missing_total[e_rec[a + i] as usize] += h as u64;
-                    member_frames += frames[e_rec[a + i] as usize];
-                }
-                reference.cell_loo[c].1 += h as u64 * (all_frames - member_frames);
             }
         }
-        for (i, t) in member_missing_total.iter().enumerate() {
-            reference.loo[i].1 += frames[i] * (missing_total - t);
+        if n >= 2 {
+            leave_one_out(
+                &mut reference,
+                images,
+                &entry_of,
+                &e_h,
+                &loo_cells,
+                all_frames,
+                params,
+            );
         }
         reference
     }
@@ -509,6 +493,300 @@ impl ClearReference {
             .iter()
             .map(|&c| self.hits[c as usize] as u64)
             .sum()
+    }
+}
+
+/// What the leave-one-out pass reads per cell (and per entry).
+struct LooCells {
+    /// The cell's clear ranges agree (MAD within the pairing tolerance).
+    stable: Vec<bool>,
+    /// Median range over every clear recording that hit the cell.
+    median: Vec<f32>,
+    /// Expected returns per scan.
+    h: Vec<u32>,
+    /// Returns of every clear recording in the cell.
+    hit_sum: Vec<u64>,
+    /// Per entry (a recording's hit of a cell): the cell's median without
+    /// that recording, NaN when no other recording hit the cell.
+    median_without: Vec<f32>,
+}
+
+/// The presence rule: `hits` reach `min_presence` of the `h × frames`
+/// returns expected.
+fn presence_holds(min_presence: f64, h: u32, frames: f64, hits: f64) -> bool {
+    frames > 0.0 && hits >= min_presence * h as f64 * frames
+}
+
+/// Scores each clear recording against the reference built without it, the
+/// way a degraded recording is paired: its return in a cell pairs with the
+/// cell's reference return or, failing that, with an azimuth neighbour's
+/// (up to `azimuth_neighbours` bins away), each reference cell pairing at
+/// most once. Among all such pairings the one keeping the most returns is
+/// taken (ties: the most own-cell pairs), found exactly per ring by dynamic
+/// programming over which neighbouring reference cells are taken, so that a
+/// revolution whose firings all fall one bin off (a free-running unit)
+/// pairs whole: a chain of shifts along the ring, not a loss at every range
+/// edge. The ring is matched as a path from its first bin: at most one pair
+/// across the seam is missed.
+///
+/// Fills `loo` (per recording) and `cell_loo` (per reference cell).
+fn leave_one_out(
+    reference: &mut ClearReference,
+    images: &[CellImage],
+    entry_of: &[u32],
+    e_h: &[u32],
+    cells: &LooCells,
+    all_frames: u64,
+    params: &FitValidParams,
+) {
+    let n_cells = reference.grid.cells();
+    let min_presence = params.reference_min_presence();
+    let mut rec_range = vec![f32::NAN; n_cells];
+    let mut rec_hits = vec![0u32; n_cells];
+    let mut rec_entry = vec![u32::MAX; n_cells];
+    let mut matcher = RingMatcher::new(params.azimuth_neighbours() as usize);
+    let rings = reference.grid.rings.clone();
+    let mut first = 0usize;
+    for (i, img) in images.iter().enumerate() {
+        let f = reference.frames[i];
+        let entries = &entry_of[first..first + img.cells.len()];
+        first += img.cells.len();
+        for (j, &c) in img.cells.iter().enumerate() {
+            rec_range[c as usize] = img.range[j];
+            rec_hits[c as usize] = img.hits[j];
+            rec_entry[c as usize] = entries[j];
+        }
+        let frames_without = (all_frames - f) as f64;
+        for ring in &rings {
+            matcher.clear();
+            for p in 0..ring.bins {
+                let c = ring.offset + p;
+                let (median, ok) = if !cells.stable[c] {
+                    (f32::NAN, false)
+                } else if rec_entry[c] != u32::MAX {
+                    let k = rec_entry[c] as usize;
+                    let med = cells.median_without[k];
+                    let hits_without = (cells.hit_sum[c] - e_h[k] as u64) as f64;
+                    let ok = med.is_finite()
+                        && presence_holds(min_presence, cells.h[c], frames_without, hits_without);
+                    (med, ok)
+                } else {
+                    let ok = presence_holds(
+                        min_presence,
+                        cells.h[c],
+                        frames_without,
+                        cells.hit_sum[c] as f64,
+                    );
+                    (cells.median[c], ok)
+                };
+                matcher.reference.push(if ok {
+                    Some(RefCell {
+                        range: median,
+                        tol: params.pairing_tolerance(median as f64) as f32,
+                        expected: cells.h[c] as u64 * f,
+                    })
+                } else {
+                    None
+                });
+                matcher
+                    .returns
+                    .push((rec_entry[c] != u32::MAX).then(|| (rec_range[c], rec_hits[c] as u64)));
+            }
+            matcher.solve();
+            for p in 0..ring.bins {
+                if let Some(r) = matcher.reference[p] {
+                    let c = ring.offset + p;
+                    let kept = matcher.kept[p];
+                    reference.loo[i].0 += kept;
+                    reference.loo[i].1 += r.expected;
+                    reference.cell_loo[c].0 += kept;
+                    reference.cell_loo[c].1 += r.expected;
+                }
+            }
+        }
+        for &c in &img.cells {
+            rec_range[c as usize] = f32::NAN;
+            rec_hits[c as usize] = 0;
+            rec_entry[c as usize] = u32::MAX;
+        }
+    }
+}
+
+/// A reference cell as the leave-one-out matching sees it.
+#[derive(Debug, Clone, Copy)]
+struct RefCell {
+    range: f32,
+    tol: f32,
+    expected: u64,
+}
+
+/// Maximum-weight matching of one ring's returns (bin `j`) to its reference
+/// cells (bins `j − k ..= j + k`), exact by dynamic programming: the state
+/// is the set of the `2k + 1` reference bins around `j` already taken, so a
+/// ring costs `O(bins · 2^(2k+1))` at worst and about `O(bins)` when the
+/// returns sit in their own cells (few states are reachable). A bin that
+/// holds two returns or more (a revolution whose firings straddle the bin
+/// edge puts two in one bin and none in the next) may pair with two
+/// reference cells, its median range standing for both. A matching crate
+/// would solve a general bipartite graph; this one is a band of width
+/// `2k + 1`, which the state machine solves exactly and in place.
+struct RingMatcher {
+    k: usize,
+    /// Per bin: the reference cell, if the recording is scored on it.
+    reference: Vec<Option<RefCell>>,
+    /// Per bin: the recording's return (median range, hits), if any.
+    returns: Vec<Option<(f32, u64)>>,
+    /// Per bin: returns kept by the reference cell of that bin.
+    kept: Vec<u64>,
+    /// Per bin and state after it: (previous state, window bits taken).
+    back: Vec<(u16, u16)>,
+    value: Vec<Option<(u64, u32)>>,
+    next: Vec<Option<(u64, u32)>>,
+    active: Vec<u16>,
+    next_active: Vec<u16>,
+    /// Window bits of the current bin that have an edge, with its weight.
+    edges: Vec<(usize, u64)>,
+}
+
+impl RingMatcher {
+    fn new(k: usize) -> Self {
+        let states = 1usize << (2 * k + 1);
+        RingMatcher {
+            k,
+            reference: Vec::new(),
+            returns: Vec::new(),
+            kept: Vec::new(),
+            back: Vec::new(),
+            value: vec![None; states],
+            next: vec![None; states],
+            active: Vec::new(),
+            next_active: Vec::new(),
+            edges: Vec::new(),
+        }
+    }
+
+    fn clear(&mut self) {
+        self.reference.clear();
+        self.returns.clear();
+    }
+
+    /// The weight of pairing the return of bin `j` with reference bin `q`.
+    fn weight(&self, j: usize, q: usize) -> Option<u64> {
+        let (range, hits) = self.returns[j]?;
+        let r = self.reference.get(q).copied().flatten()?;
+        ((range - r.range).abs() <= r.tol).then(|| hits.min(r.expected))
+    }
+
+    /// Splits the returns of bin `j` over the reference bins of `taken`
+    /// (window bits), nearest bins first: `(bin, kept)` pairs.
+    fn split(&self, j: usize, taken: u16) -> impl Iterator<Item = (usize, u64)> + '_ {
+        let k = self.k;
+        let mut left = self.returns[j].map_or(0, |r| r.1);
+        let mut bits: Vec<usize> = (0..=2 * k).filter(|b| taken & (1 << b) != 0).collect();
+        bits.sort_by_key(|&b| (b.abs_diff(k), b));
+        bits.into_iter().map(move |b| {
+            let q = j + b - k;
+            let w = self
+                .weight(j, q)
+                .expect("a chosen pair has a weight")
+                .min(left);
+            left -= w;
+            (q, w)
+        })
+    }
+
+    fn solve(&mut self) {
+        let bins = self.returns.len();
+        let (k, states) = (self.k, self.value.len());
+        self.back.clear();
+        self.back.resize(bins * states, (0, 0));
+        self.kept.clear();
+        self.kept.resize(bins, 0);
+        self.value.iter_mut().for_each(|v| *v = None);
+        self.value[0] = Some((0, 0));
+        self.active.clear();
+        self.active.push(0);
+        for j in 0..bins {
+            self.next_active.clear();
+            self.edges.clear();
+            let hits = self.returns[j].map_or(0, |r| r.1);
+            for b in 0..=2 * k {
+                if j + b >= k
+                    && let Some(w) = self.weight(j, j + b - k)
+                {
+                    self.edges.push((b, w));
+                }
+            }
+            let most = hits.min(2) as usize;
+            for ai in 0..self.active.len() {
+                let s = self.active[ai] as usize;
+                let (w, own) = self.value[s].expect("active state has a value");
+                // Nothing taken: the returns of bin j pair with nothing.
+                self.offer(j, s, s >> 1, (w, own), 0);
+                // The bin's edges to reference bins this state leaves free
+                // (taken out of `self` for the loop: `offer` borrows it).
+                let edges = std::mem::take(&mut self.edges);
+                let free = |b: usize| s & (1 << b) == 0;
+                for (x, &(b1, w1)) in edges.iter().enumerate().filter(|(_, e)| free(e.0)) {
+                    let own1 = u32::from(b1 == k);
+                    let add = w1.min(hits);
+                    self.offer(j, s, (s | 1 << b1) >> 1, (w + add, own + own1), 1 << b1);
+                    if most < 2 {
+                        continue;
+                    }
+                    for &(b2, w2) in edges[x + 1..].iter().filter(|e| free(e.0)) {
+                        let add = (w1 + w2).min(hits);
+                        let own2 = own1 + u32::from(b2 == k);
+                        let taken = (1u16 << b1) | (1 << b2);
+                        self.offer(j, s, (s | taken as usize) >> 1, (w + add, own2), taken);
+                    }
+                }
+                self.edges = edges;
+            }
+            for ai in 0..self.active.len() {
+                let s = self.active[ai] as usize;
+                self.value[s] = None;
+            }
+            std::mem::swap(&mut self.active, &mut self.next_active);
+            std::mem::swap(&mut self.value, &mut self.next);
+            self.active.sort_unstable();
+        }
+        let Some(&best) = self.active.iter().max_by(|&&a, &&b| {
+            self.value[a as usize]
+                .cmp(&self.value[b as usize])
+                .then(b.cmp(&a))
+        }) else {
+            return;
+        };
+        let mut s = best as usize;
+        let mut kept = std::mem::take(&mut self.kept);
+        for j in (0..bins).rev() {
+            let (prev, taken) = self.back[j * states + s];
+            for (q, w) in self.split(j, taken) {
+                kept[q] = w;
+            }
+            s = prev as usize;
+        }
+        self.kept = kept;
+        for ai in 0..self.active.len() {
+            let s = self.active[ai] as usize;
+            self.value[s] = None;
+        }
+    }
+
+    /// Offers state `to` after bin `j`, reached from `from` with `value`.
+    fn offer(&mut self, j: usize, from: usize, to: usize, value: (u64, u32), taken: u16) {
+        let states = self.value.len();
+        match self.next[to] {
+            Some(v) if v >= value => {}
+            old => {
+                if old.is_none() {
+                    self.next_active.push(to as u16);
+                }
+                self.next[to] = Some(value);
+                self.back[j * states + to] = (from as u16, taken);
+            }
+        }
     }
 }
 
@@ -631,6 +909,77 @@ mod tests {
         ];
         let r = ClearReference::build(grid(), &imgs, &p);
         assert_eq!(r.leave_one_out(), &[(2, 2), (2, 2), (2, 2), (1, 2)]);
+    }
+
+    /// One ring of 12 bins seeing three walls (10, 20, 30 m, then 10 m
+    /// again): five recordings on the grid and one whose firings all fall
+    /// one bin on (each bin holds the return of the bin before it).
+    fn walls_with_one_shifted(shift: usize) -> Vec<CellImage> {
+        let scene = [
+            10.0, 10.0, 10.0, 20.0, 20.0, 20.0, 30.0, 30.0, 30.0, 10.0, 10.0, 10.0,
+        ];
+        let on_grid: Vec<(u32, f32, f32)> = (0..12).map(|c| (c as u32, scene[c], 5.0)).collect();
+        let shifted: Vec<(u32, f32, f32)> = (0..12)
+            .map(|c| (c as u32, scene[(c + 12 - shift) % 12], 5.0))
+            .collect();
+        let mut imgs = vec![img(&on_grid); 5];
+        imgs.push(img(&shifted));
+        imgs
+    }
+
+    fn one_ring_grid() -> CellGrid {
+        let mut spec = LidarSpec::vlp16();
+        spec.elevation_deg = vec![0.0];
+        spec.azimuth_resolution_deg = 30.0;
+        CellGrid::new(&spec)
+    }
+
+    #[test]
+    fn a_revolution_one_bin_off_pairs_whole_by_a_chain_of_shifts() {
+        let p = FitParams::default().check().unwrap();
+        let r = ClearReference::build(one_ring_grid(), &walls_with_one_shifted(1), &p);
+        // Every bin pairs with the bin before it; only the pair across the
+        // ring's seam (bin 0 with bin 11) is out of reach.
+        assert_eq!(r.leave_one_out()[5], (11, 12));
+        assert!(r.leave_one_out()[..5].iter().all(|&x| x == (12, 12)));
+        // Without neighbours it loses the three bins at the walls' edges.
+        let p0 = FitParams::default().azimuth_neighbours(0).check().unwrap();
+        let r0 = ClearReference::build(one_ring_grid(), &walls_with_one_shifted(1), &p0);
+        assert_eq!(r0.leave_one_out()[5], (9, 12));
+    }
+
+    #[test]
+    fn a_revolution_two_bins_off_needs_two_neighbours() {
+        let imgs = walls_with_one_shifted(2);
+        let p1 = FitParams::default().check().unwrap();
+        let r1 = ClearReference::build(one_ring_grid(), &imgs, &p1);
+        // Two bins off, one neighbour: each wall's first return lies two
+        // bins past the edge and pairs nowhere (bins 4, 7, 10), and four
+        // 10 m returns (bins 0–3) compete for three 10 m cells.
+        assert_eq!(r1.leave_one_out()[5], (8, 12));
+        let p2 = FitParams::default().azimuth_neighbours(2).check().unwrap();
+        let r2 = ClearReference::build(one_ring_grid(), &imgs, &p2);
+        assert_eq!(r2.leave_one_out()[5], (10, 12));
+    }
+
+    #[test]
+    fn a_bin_holding_two_returns_pairs_with_its_empty_neighbour() {
+        let p = FitParams::default().check().unwrap();
+        let mut imgs = walls_with_one_shifted(0);
+        // The last recording's firing for bin 4 fell into bin 3 (both on the
+        // 20 m wall): bin 3 holds two returns, bin 4 none.
+        let last = imgs.last_mut().unwrap();
+        last.cells.remove(4);
+        last.range.remove(4);
+        last.reflectivity.remove(4);
+        last.hits.remove(4);
+        last.hits[3] = 2;
+        let r = ClearReference::build(one_ring_grid(), &imgs, &p);
+        assert_eq!(r.leave_one_out()[5], (12, 12));
+        // Without neighbours bin 4 is lost.
+        let p0 = FitParams::default().azimuth_neighbours(0).check().unwrap();
+        let r0 = ClearReference::build(one_ring_grid(), &imgs, &p0);
+        assert_eq!(r0.leave_one_out()[5], (11, 12));
     }
 
     #[test]

@@ -235,9 +235,13 @@ fn pcap_recordings_in_lidar_work_end_to_end() {
     let Some(capture) = capture() else { return };
     let dir = tempfile::tempdir().unwrap();
     let camp = dir.path().join("campaign");
+    // 24 fog recordings: the edge test (one-sided sign flips over
+    // recordings at 1 %) needs at least seven that carry the edge, and on 16
+    // this seed's low-MOR recordings were too few once recordings paired
+    // across shifted firings (p 0.014; gain 165 nats per recording).
     let cfg = SemiRealConfig {
         clear_pcap_parts: 3,
-        degraded: 16,
+        degraded: 24,
         ..SemiRealConfig::default()
     };
     semi_real::vlp16_campaign(&capture, &camp, &cfg, 4).unwrap();
