@@ -8,7 +8,7 @@
 //!   exponent, edge width, ε and π) by maximum likelihood: for a fixed `c`,
 //!   `r/(ρ·MOR^c) = u·MOR^(1−c)` with `u = r/(MOR·ρ)`, so every recording's
 //!   trials move along `ln u` by `(1 − c)·ln MOR` and the survival fit runs
-//!   unchanged on them; `c` is profiled (golden section);
+//!   unchanged on them; `c` is profiled (argmin's golden-section search);
 //! - chooses between the line and the power law on held-out recordings
 //!   (folds over recordings, per-recording log-likelihood gains, one-sided
 //!   sign-flip test), so the line stays unless the bend predicts recordings
@@ -119,27 +119,8 @@ pub fn fit_power(
 ) -> Option<PowerFit> {
     let eval = |c: f64| fit_band_at(recs, n_bands, band, c, opts, bin);
     let cost = |c: f64| eval(c).map_or(f64::INFINITY, |r| r.nll);
-    let g = (5f64.sqrt() - 1.0) / 2.0;
-    let (mut a, mut b) = EXPONENT_RANGE;
-    let mut x1 = b - g * (b - a);
-    let mut x2 = a + g * (b - a);
-    let (mut f1, mut f2) = (cost(x1), cost(x2));
-    while b - a > EXPONENT_TOL {
-        if f1 <= f2 {
-            b = x2;
-            x2 = x1;
-            f2 = f1;
-            x1 = b - g * (b - a);
-            f1 = cost(x1);
-        } else {
-            a = x1;
-            x1 = x2;
-            f1 = f2;
-            x2 = a + g * (b - a);
-            f2 = cost(x2);
-        }
-    }
-    let c = 0.5 * (a + b);
+    let (lo, hi) = EXPONENT_RANGE;
+    let c = crate::stats::optim::minimize_scalar(&cost, lo, hi, EXPONENT_TOL)?;
     let fit = eval(c)?;
     fit.nll.is_finite().then_some(PowerFit { exponent: c, fit })
 }

@@ -1,7 +1,9 @@
 //! Derivative-free minimisation (argmin's Nelder–Mead) of a cost over a few
-//! parameters, with one restart from the optimum, plus a numerical Hessian.
+//! parameters, with one restart from the optimum, argmin's golden-section
+//! search over one bounded parameter, plus a numerical Hessian.
 
 use argmin::core::{CostFunction, Error, Executor, State};
+use argmin::solver::goldensectionsearch::GoldenSectionSearch;
 use argmin::solver::neldermead::NelderMead;
 
 /// A cost returned where a parameter vector is outside its domain.
@@ -72,6 +74,34 @@ pub fn minimize<F: Fn(&[f64]) -> f64>(f: &F, x0: &[f64], steps: &[f64]) -> Minim
     } else {
         first
     }
+}
+
+struct Scalar<'a, F>(&'a F);
+
+impl<F: Fn(f64) -> f64> CostFunction for Scalar<'_, F> {
+    type Param = f64;
+    type Output = f64;
+    fn cost(&self, x: &f64) -> Result<f64, Error> {
+        let c = (self.0)(*x);
+        Ok(if c.is_finite() { c } else { INVALID })
+    }
+}
+
+/// Minimises a unimodal `f` over `[lo, hi]` by golden-section search
+/// (argmin), starting from the golden point of the interval; stops when the
+/// bracket is narrower than about `tol` near `x ≈ 1` (argmin's tolerance is
+/// relative: `rel_tol · (|x₁| + |x₂|)`, here `tol / 2`). Returns the best
+/// point evaluated, `None` when the search could not start. Deterministic.
+pub fn minimize_scalar<F: Fn(f64) -> f64>(f: &F, lo: f64, hi: f64, tol: f64) -> Option<f64> {
+    let solver = GoldenSectionSearch::new(lo, hi)
+        .and_then(|s| s.with_tolerance(0.5 * tol))
+        .ok()?;
+    let start = hi - (5f64.sqrt() - 1.0) / 2.0 * (hi - lo);
+    let res = Executor::new(Scalar(f), solver)
+        .configure(|s| s.param(start).max_iters(200))
+        .run()
+        .ok()?;
+    res.state().get_best_param().copied()
 }
 
 /// Central-difference Hessian of `f` at `x` with steps `h`.
