@@ -89,6 +89,19 @@ fn finds_the_hidden_effect_and_writes_a_table_apply_uses() {
     );
     let g = &r["gain"];
     assert!(g["relative"].as_f64().unwrap() > 0.0, "{g}");
+    // Every test says what it could have found: a positive number, or why
+    // it cannot tell; the tests that found nothing say so on stdout.
+    for f in r["findings"].as_array().unwrap() {
+        match f["detectable"].as_f64() {
+            Some(x) => assert!(x.is_finite() && x > 0.0, "{f}"),
+            None => assert!(f["detectable_reason"].is_string(), "{f}"),
+        }
+    }
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        stdout.contains("effect larger than") && stdout.contains("(80 % power)"),
+        "{stdout}"
+    );
     assert!(
         r["baseline"]["metrics"]["voxel_global_difference"]
             .as_f64()

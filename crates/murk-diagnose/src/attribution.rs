@@ -91,6 +91,56 @@ impl Binning {
         Binning::Numeric { edges }
     }
 
+    /// [`Binning::numeric`] of a multiset given as `(value, count)` pairs:
+    /// the same edges, bit for bit, as `numeric` on the values each
+    /// repeated `count` times, without holding them. The diagnosis bins a
+    /// point covariate of millions of returns this way, from the counts of
+    /// its reference cells.
+    pub fn numeric_counted(values: &[(f64, u64)], quantile_bins: usize) -> Binning {
+        let mut v: Vec<(f64, u64)> = values
+            .iter()
+            .copied()
+            .filter(|(x, c)| x.is_finite() && *c > 0)
+            .collect();
+        v.sort_by(|a, b| a.0.total_cmp(&b.0));
+        // Runs of bit-identical values (what the sorted multiset holds).
+        let mut runs: Vec<(f64, u64)> = Vec::with_capacity(v.len());
+        for (x, c) in v {
+            match runs.last_mut() {
+                Some(r) if r.0.total_cmp(&x).is_eq() => r.1 += c,
+                _ => runs.push((x, c)),
+            }
+        }
+        // `dedup` of the sorted values: equal by `==` (−0 and 0 too), the
+        // first kept.
+        let mut distinct: Vec<f64> = Vec::with_capacity(runs.len());
+        for &(x, _) in &runs {
+            if distinct.last() != Some(&x) {
+                distinct.push(x);
+            }
+        }
+        let edges = if distinct.len() <= MAX_DISTINCT_BINS.max(quantile_bins) {
+            distinct.windows(2).map(|w| 0.5 * (w[0] + w[1])).collect()
+        } else {
+            let n: u64 = runs.iter().map(|r| r.1).sum();
+            // The value at position `i` of the sorted multiset.
+            let mut ends = Vec::with_capacity(runs.len());
+            let mut end = 0u64;
+            for r in &runs {
+                end += r.1;
+                ends.push(end);
+            }
+            let at = |i: u64| runs[ends.partition_point(|&e| e <= i)].0;
+            let q = quantile_bins as u64;
+            let mut e: Vec<f64> = (1..q).map(|k| at((k * n / q).min(n - 1))).collect();
+            e.dedup();
+            let first = runs[0].0;
+            e.retain(|x| *x > first);
+            e
+        };
+        Binning::Numeric { edges }
+    }
+
     /// One bin per category.
     pub fn categories<'a>(values: impl IntoIterator<Item = &'a str>) -> Binning {
         let mut names: Vec<String> = values.into_iter().map(str::to_string).collect();
@@ -243,12 +293,31 @@ pub fn point_test(
     permutations: usize,
     seed: u64,
 ) -> TestOutcome {
+    point_test_stream(
+        units.iter().copied(),
+        recordings,
+        binning,
+        permutations,
+        seed,
+    )
+}
+
+/// [`point_test`] on units produced one at a time (in the same order, the
+/// same outcome bit for bit): the test holds per recording and bin two
+/// sums, never the units.
+pub fn point_test_stream(
+    units: impl IntoIterator<Item = (usize, f64, f64, f64)>,
+    recordings: usize,
+    binning: &Binning,
+    permutations: usize,
+    seed: u64,
+) -> TestOutcome {
     let nb = binning.len().max(1);
     // Per recording: Σw·e and Σw per bin, and the covariate sums.
     let mut s = vec![0.0; recordings * nb];
     let mut w = vec![0.0; recordings * nb];
     let mut xs = vec![0.0; nb];
-    for &(r, x, e, wt) in units {
+    for (r, x, e, wt) in units {
         let Some(b) = binning.of_number(x) else {
             continue;
         };
@@ -514,6 +583,46 @@ mod tests {
         let p = [0.01, 0.04, 0.03, 0.5];
         let a = holm(&p);
         assert_eq!(a, vec![0.04, 0.09, 0.09, 0.5]);
+    }
+
+    #[test]
+    fn counted_binning_equals_binning_the_repeated_values() {
+        let mut g = 5;
+        for case in 0..40 {
+            // Few distinct values (by value), many (quantiles), ties, zeros
+            // of both signs, non-finite values.
+            let distinct = [3, 20, 30, 200][case % 4];
+            let mut counted: Vec<(f64, u64)> = (0..distinct)
+                .map(|i| {
+                    let x = ((lcg(&mut g) + 0.5) * 40.0).round() / 4.0 - 2.0;
+                    let x = if i % 17 == 0 {
+                        -0.0
+                    } else if i % 13 == 0 {
+                        0.0
+                    } else {
+                        x
+                    };
+                    (x, ((lcg(&mut g) + 0.5) * 9.0) as u64)
+                })
+                .collect();
+            counted.push((f64::NAN, 3));
+            counted.push((f64::INFINITY, 2));
+            let repeated: Vec<f64> = counted
+                .iter()
+                .flat_map(|&(x, c)| std::iter::repeat_n(x, c as usize))
+                .collect();
+            for q in [2, 4, 12] {
+                let a = Binning::numeric(&repeated, q);
+                let b = Binning::numeric_counted(&counted, q);
+                let bits = |b: &Binning| match b {
+                    Binning::Numeric { edges } => {
+                        edges.iter().map(|e| e.to_bits()).collect::<Vec<_>>()
+                    }
+                    Binning::Categories { .. } => unreachable!(),
+                };
+                assert_eq!(bits(&a), bits(&b), "case {case}, {q} bins");
+            }
+        }
     }
 
     #[test]

@@ -172,7 +172,9 @@ impl NearHistogram {
     }
 }
 
-/// A clear recording.
+/// A clear recording. Its points are not held (a campaign's clear clouds
+/// would grow memory with every recording): [`ClearRec::read`] reads them
+/// again when a simulation needs them.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ClearRec {
     /// Recording id.
@@ -181,11 +183,22 @@ pub struct ClearRec {
     pub order: usize,
     /// The point-cloud file.
     pub lidar: PathBuf,
-    /// Its points, calibrated reflectivity (the input of the simulations).
-    pub cloud: PointCloud,
     /// Its scans (revolutions of a `.pcap`, 1 for any other file).
     pub frames: u32,
 }
+
+impl ClearRec {
+    /// Its points in calibrated reflectivity (the input of the
+    /// simulations), read from its file as [`load`] read them.
+    pub fn read(&self, spec: &LidarSpec) -> Result<PointCloud, DiagnoseError> {
+        read_calibrated(&self.lidar, spec)
+    }
+}
+
+/// Recordings read at once where `load` reads recordings in order and
+/// folds what they give in that order: enough to keep every thread busy,
+/// few enough that memory does not grow with the campaign.
+const READ_CHUNK: usize = 16;
 
 /// A campaign read for one weather.
 #[derive(Debug, Clone)]
@@ -306,65 +319,71 @@ pub fn load(
                 .into(),
         });
     }
-    // Each clear recording is read once: its cloud is kept for the
-    // simulations, its cell points build the reference (as murk-fit's
-    // `build_reference` does) and are paired for the per-cell offsets.
-    type ClearRead = (PointCloud, Vec<CellPoint>, u32);
-    let read: Vec<Result<ClearRead, DiagnoseError>> = clear_in
+    // Each clear recording is read twice, its points held only while it is
+    // read: once for its cell image (the reference is built from every
+    // image, as murk-fit's `build_reference` builds it), once, against the
+    // finished reference, for what pairing does to it (the per-cell
+    // offsets).
+    let clear_points = |r: &RecordingInput| -> Result<(Vec<CellPoint>, u32), DiagnoseError> {
+        let (cloud, frames) = read_revolutions(&r.lidar, &spec)?;
+        let points = cell_points(&grid, &cloud, &r.lidar).map_err(|e| DiagnoseError::Read {
+            path: r.lidar.clone(),
+            reason: e.to_string(),
+        })?;
+        Ok((points, frames))
+    };
+    let read: Vec<Result<(CellImage, u32), DiagnoseError>> = clear_in
         .par_iter()
         .map(|r| {
-            let (cloud, frames) = read_revolutions(&r.lidar, &spec)?;
-            let points = cell_points(&grid, &cloud, &r.lidar).map_err(|e| DiagnoseError::Read {
-                path: r.lidar.clone(),
-                reason: e.to_string(),
-            })?;
-            Ok((cloud, points, frames))
+            let (points, frames) = clear_points(r)?;
+            Ok((
+                CellImage::from_frames(&points, frames, grid.cells()),
+                frames,
+            ))
         })
         .collect();
-    let mut clear_clouds = Vec::new();
-    let mut clear_points = Vec::new();
-    let mut clear_frames = Vec::new();
+    let mut images = Vec::with_capacity(read.len());
+    let mut clear_frames = Vec::with_capacity(read.len());
     for r in read {
-        let (c, p, f) = r?;
-        clear_clouds.push(c);
-        clear_points.push(p);
-        clear_frames.push(f);
+        let (image, frames) = r?;
+        images.push(image);
+        clear_frames.push(frames);
     }
-    let images: Vec<CellImage> = clear_points
-        .iter()
-        .zip(&clear_frames)
-        .map(|(p, &f)| CellImage::from_frames(p, f, grid.cells()))
-        .collect();
     let reference = ClearReference::build(grid.clone(), &images, params);
     drop(images);
-    // What pairing does to range and reflectivity in clear weather, per cell.
-    let offsets: Vec<Vec<(u32, f64, f64)>> = clear_points
-        .par_iter()
-        .zip(&clear_frames)
-        .map(|(points, &frames)| {
-            let (_, pairs) = pair_frames_detailed(&reference, points, frames, params);
-            pairs
-                .iter()
-                .map(|p| {
-                    let q = points[p.point as usize];
-                    let c = p.cell as usize;
-                    (
-                        p.cell,
-                        q.range as f64 - reference.range(c) as f64,
-                        log_ratio(q.reflectivity as f64, reference.reflectivity(c) as f64),
-                    )
-                })
-                .collect()
-        })
-        .collect();
-    drop(clear_points);
+    // What pairing does to range and reflectivity in clear weather, per
+    // cell, summed in recording order (a few recordings at a time).
     let mut off = vec![(0.0f64, 0.0f64, 0u32); grid.cells()];
-    for o in offsets {
-        for (c, dr, dl) in o {
-            let e = &mut off[c as usize];
-            e.0 += dr;
-            e.1 += dl;
-            e.2 += 1;
+    for chunk in clear_in.chunks(READ_CHUNK) {
+        // Per kept return of a clear recording: cell, range and log
+        // reflectivity offsets.
+        type Offsets = Vec<(u32, f64, f64)>;
+        let offsets: Vec<Result<Offsets, DiagnoseError>> = chunk
+            .par_iter()
+            .map(|r| {
+                let (points, frames) = clear_points(r)?;
+                let (_, pairs) = pair_frames_detailed(&reference, &points, frames, params);
+                Ok(pairs
+                    .iter()
+                    .map(|p| {
+                        let q = points[p.point as usize];
+                        let c = p.cell as usize;
+                        (
+                            p.cell,
+                            q.range as f64 - reference.range(c) as f64,
+                            log_ratio(q.reflectivity as f64, reference.reflectivity(c) as f64),
+                        )
+                    })
+                    .collect())
+            })
+            .collect();
+        for o in offsets {
+            for (c, dr, dl) in o? {
+                let e = &mut off[c as usize];
+                e.0 += dr;
+                e.1 += dl;
+                e.2 += 1;
+            }
         }
     }
     let mut cells = vec![None; grid.cells()];
@@ -394,10 +413,8 @@ pub fn load(
     }
     let clear: Vec<ClearRec> = clear_in
         .iter()
-        .zip(clear_clouds)
         .zip(clear_frames)
-        .map(|((r, cloud), frames)| ClearRec {
-            cloud,
+        .map(|(r, frames)| ClearRec {
             frames,
             id: r.id.clone(),
             order: order.get(r.id.as_str()).copied().unwrap_or(0),

@@ -21,6 +21,7 @@
 //!   measured one by [`crate::scene::SceneMetrics`].
 
 use std::collections::BTreeMap;
+use std::sync::Arc;
 
 use murk_fit::FitValidParams;
 use murk_fit::observe::cell_points;
@@ -34,7 +35,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::DiagnoseError;
-use crate::data::{Loaded, NearHistogram, Rec, log_ratio, read_calibrated};
+use crate::data::{CellInfo, Kept, Loaded, NearHistogram, Rec, log_ratio, read_calibrated};
 use crate::scene::{SceneMetrics, VoxelBox};
 
 /// Keep probabilities are clipped into `[P_FLOOR, 1 − P_FLOOR]` for the log
@@ -55,16 +56,27 @@ pub struct SimOptions {
 }
 
 /// One recording evaluated under one model.
+///
+/// It holds what the simulations gave (a few numbers per recording) and the
+/// table it was evaluated under, not its per-unit predictions: those (a keep
+/// probability per reference cell, a range and an intensity residual per
+/// kept return, megabytes per recording) are computed again from the
+/// recording's per-cell summaries each time they are read ([`RecEval::p`],
+/// [`RecEval::range_residuals`], [`RecEval::intensity_residuals`]), bit for
+/// bit as the evaluation would have held them, so a diagnosis's memory does
+/// not grow with the evaluation sets it keeps.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RecEval {
     /// Index into `Loaded::recs`.
     pub rec: usize,
-    /// Keep probability per survival unit (aligned with `Rec::units`).
-    pub p: Vec<f64>,
-    /// Range residual per kept return, metres (aligned with `Rec::kept`).
-    pub range_residual: Vec<f64>,
-    /// Intensity log-ratio residual per kept return.
-    pub intensity_residual: Vec<f64>,
+    /// The table the recording was evaluated under (shared by one
+    /// [`evaluate`] call's evaluations).
+    table: Arc<CoefficientTable>,
+    /// Whether its applier simulated the near-range returns, and its seed
+    /// (the applier is built again with them).
+    near: bool,
+    /// See `near`.
+    seed: u64,
     /// Mean ghost + ring count of the simulations (`None` without them).
     pub near_sim: Option<f64>,
     /// The same per laser, azimuth sector and range bin.
@@ -74,11 +86,90 @@ pub struct RecEval {
 }
 
 impl RecEval {
-    /// Survival residuals `kept/trials − p` with their weights.
-    pub fn survival_residuals<'a>(&'a self, rec: &'a Rec) -> impl Iterator<Item = (f64, f64)> + 'a {
+    /// Keep probability per survival unit (aligned with `Rec::units`).
+    pub fn p(&self, loaded: &Loaded) -> Vec<f64> {
+        let rec = &loaded.recs[self.rec];
+        let table = self.table.as_ref();
+        let ap = applier(table, loaded, rec, self.near, self.seed)
+            .expect("the applier was built when the recording was evaluated");
+        let cell = |c: u32| loaded.cells[c as usize].expect("units are reference cells");
         rec.units
             .iter()
-            .zip(&self.p)
+            .map(|u| {
+                let c = cell(u.cell);
+                let f = extension_value(
+                    table,
+                    loaded,
+                    ExtensionObservable::Survival,
+                    &c.cov,
+                    &rec.scan,
+                    rec.mor,
+                );
+                ap.survival_probability(c.cov.range, c.cov.reflectivity, f, false)
+            })
+            .collect()
+    }
+
+    /// Range residual per kept return, metres (aligned with `Rec::kept`):
+    /// measured range less the reference cell's, less what pairing gives
+    /// the cell in clear weather, less the table's range extension.
+    pub fn range_residuals(&self, loaded: &Loaded) -> Vec<f64> {
+        self.per_kept(loaded, ExtensionObservable::Range, |k, c, bias| {
+            k.range as f64 - c.cov.range - c.clear_range_offset - bias
+        })
+    }
+
+    /// Intensity log-ratio residual per kept return (aligned with
+    /// `Rec::kept`): log ratio of measured to reference reflectivity, less
+    /// the clear-weather offset, less the log of the table's intensity
+    /// factor.
+    pub fn intensity_residuals(&self, loaded: &Loaded) -> Vec<f64> {
+        self.per_kept(loaded, ExtensionObservable::Intensity, |k, c, fac| {
+            log_ratio(k.reflectivity as f64, c.cov.reflectivity)
+                - c.clear_log_reflectivity_offset
+                - fac.max(1e-6).ln()
+        })
+    }
+
+    /// `residual(kept return, its reference cell, the table's extension of
+    /// `obs` there)` per kept return of the recording.
+    fn per_kept(
+        &self,
+        loaded: &Loaded,
+        obs: ExtensionObservable,
+        residual: impl Fn(&Kept, &CellInfo, f64) -> f64,
+    ) -> Vec<f64> {
+        let rec = &loaded.recs[self.rec];
+        rec.kept
+            .iter()
+            .map(|k| {
+                let c = loaded.cells[k.cell as usize]
+                    .as_ref()
+                    .expect("pairs are reference cells");
+                let ext = extension_value(&self.table, loaded, obs, &c.cov, &rec.scan, rec.mor);
+                residual(k, c, ext)
+            })
+            .collect()
+    }
+
+    /// The range (`Range`) or intensity (`Intensity`) residuals.
+    pub fn kept_residuals(&self, loaded: &Loaded, obs: ExtensionObservable) -> Vec<f64> {
+        if obs == ExtensionObservable::Range {
+            self.range_residuals(loaded)
+        } else {
+            self.intensity_residuals(loaded)
+        }
+    }
+
+    /// Survival residuals `kept/trials − p` with their weights.
+    pub fn survival_residuals<'a>(
+        &self,
+        loaded: &Loaded,
+        rec: &'a Rec,
+    ) -> impl Iterator<Item = (f64, f64)> + 'a {
+        rec.units
+            .iter()
+            .zip(self.p(loaded))
             .map(|(u, p)| (u.kept as f64 / u.trials as f64 - p, u.trials as f64))
     }
 
@@ -269,67 +360,25 @@ pub fn evaluate(
     sim: Option<&SimOptions>,
     fit_params: &FitValidParams,
 ) -> Result<Vec<RecEval>, DiagnoseError> {
+    let shared = Arc::new(table.clone());
     let results: Vec<Result<RecEval, DiagnoseError>> = which
         .par_iter()
-        .map(|&j| evaluate_one(loaded, table, j, sim, fit_params))
+        .map(|&j| evaluate_one(loaded, &shared, j, sim, fit_params))
         .collect();
     results.into_iter().collect()
 }
 
 fn evaluate_one(
     loaded: &Loaded,
-    table: &CoefficientTable,
+    table: &Arc<CoefficientTable>,
     j: usize,
     sim: Option<&SimOptions>,
     fit_params: &FitValidParams,
 ) -> Result<RecEval, DiagnoseError> {
     let rec = &loaded.recs[j];
     let seed = sim.map_or(0, |s| s.seed);
-    let ap = applier(table, loaded, rec, sim.is_some(), seed)?;
-    let cell = |c: u32| loaded.cells[c as usize].expect("units and pairs are reference cells");
-    let p = rec
-        .units
-        .iter()
-        .map(|u| {
-            let c = cell(u.cell);
-            let f = extension_value(
-                table,
-                loaded,
-                ExtensionObservable::Survival,
-                &c.cov,
-                &rec.scan,
-                rec.mor,
-            );
-            ap.survival_probability(c.cov.range, c.cov.reflectivity, f, false)
-        })
-        .collect();
-    let mut range_residual = Vec::with_capacity(rec.kept.len());
-    let mut intensity_residual = Vec::with_capacity(rec.kept.len());
-    for k in &rec.kept {
-        let c = cell(k.cell);
-        let bias = extension_value(
-            table,
-            loaded,
-            ExtensionObservable::Range,
-            &c.cov,
-            &rec.scan,
-            rec.mor,
-        );
-        let fac = extension_value(
-            table,
-            loaded,
-            ExtensionObservable::Intensity,
-            &c.cov,
-            &rec.scan,
-            rec.mor,
-        );
-        range_residual.push(k.range as f64 - c.cov.range - c.clear_range_offset - bias);
-        intensity_residual.push(
-            log_ratio(k.reflectivity as f64, c.cov.reflectivity)
-                - c.clear_log_reflectivity_offset
-                - fac.max(1e-6).ln(),
-        );
-    }
+    let near = sim.is_some();
+    let ap = applier(table, loaded, rec, near, seed)?;
     let (near_sim, near_bins_sim, scene) = match sim {
         None => (None, None, None),
         Some(opts) => {
@@ -339,9 +388,9 @@ fn evaluate_one(
     };
     Ok(RecEval {
         rec: j,
-        p,
-        range_residual,
-        intensity_residual,
+        table: Arc::clone(table),
+        near,
+        seed,
         near_sim,
         near_bins_sim,
         scene,
@@ -366,7 +415,7 @@ fn simulate(
     fit_params: &FitValidParams,
 ) -> Result<(f64, NearHistogram, SceneMetrics), DiagnoseError> {
     let clear_rec = &loaded.clear[rec.clear];
-    let clear = &clear_rec.cloud;
+    let clear = &clear_rec.read(&loaded.spec)?;
     let measured = xyz(&read_calibrated(&rec.lidar, &loaded.spec)?);
     let grid = loaded.reference.grid();
     let mut near = 0.0;
@@ -457,7 +506,7 @@ impl Metrics {
         for e in evals {
             let rec = &loaded.recs[e.rec];
             let (mut pk, mut ok, mut tr) = (0.0, 0.0, 0.0);
-            for (u, &p) in rec.units.iter().zip(&e.p) {
+            for (u, p) in rec.units.iter().zip(e.p(loaded)) {
                 let p = p.clamp(P_FLOOR, 1.0 - P_FLOOR);
                 let (k, n) = (u.kept as f64, u.trials as f64);
                 ll -= k * p.ln() + (n - k) * (1.0 - p).ln();
@@ -469,7 +518,8 @@ impl Metrics {
             if tr > 0.0 {
                 ncr += (pk - ok).abs() / tr;
             }
-            for (&r, &i) in e.range_residual.iter().zip(&e.intensity_residual) {
+            let (range, intensity) = (e.range_residuals(loaded), e.intensity_residuals(loaded));
+            for (&r, &i) in range.iter().zip(&intensity) {
                 rs += r;
                 rs2 += r * r;
                 is += i;

@@ -287,8 +287,9 @@ fn fit_bins(
         ExtensionObservable::Survival => {
             let data = SurvivalData::new(loaded, table, evals, covariate, Some(binning))?;
             for it in &data.items {
-                weights[it.bin] += it.trials;
-                xsum[it.bin] += it.trials * it.x;
+                let n = it.trials as f64;
+                weights[it.bin as usize] += n;
+                xsum[it.bin as usize] += n * it.x;
             }
             let (v, pooled, e) = data.fit_bins(nb, refit_edge);
             edge = e;
@@ -298,11 +299,7 @@ fn fit_bins(
             let mut s = vec![(0.0f64, 0.0f64); nb];
             for e in evals {
                 let rec = &loaded.recs[e.rec];
-                let res = if observable == ExtensionObservable::Range {
-                    &e.range_residual
-                } else {
-                    &e.intensity_residual
-                };
+                let res = e.kept_residuals(loaded, observable);
                 for (k, r) in rec.kept.iter().zip(res) {
                     let cov = &cell(k.cell).cov;
                     if let Some(b) = bin_of(binning, covariate, cov, &rec.scan) {
@@ -396,55 +393,58 @@ fn fit_bins(
     })
 }
 
-/// One survival unit: a reference cell of one recording.
+/// One survival unit: a reference cell of one recording. Compact (40
+/// bytes; a fit set has millions): the cell's range and reflectivity are
+/// looked up from its cell, the MOR from its recording's applier.
 #[derive(Debug, Clone, Copy)]
 struct Item {
     /// Its bin (0 without a binning).
-    bin: usize,
+    bin: u32,
     /// Index of its recording's applier.
-    applier: usize,
-    /// Range, m.
-    r: f64,
-    /// Calibrated reflectivity.
-    rho: f64,
+    applier: u32,
+    /// Reference cell.
+    cell: u32,
     /// Kept returns.
-    kept: f64,
+    kept: u32,
     /// Trials.
-    trials: f64,
+    trials: u32,
     /// Factor of the terms the table already has.
     base: f64,
     /// The covariate's numeric value (NaN when it has none).
     x: f64,
-    /// The recording's MOR.
-    mor: f64,
 }
 
 /// The fit set's survival units under a table, for likelihood fits of a
 /// factor on the vanishing distance.
-struct SurvivalData {
+struct SurvivalData<'a> {
+    loaded: &'a Loaded,
     appliers: Vec<murk_infer::Applier>,
+    /// The MOR of each applier's recording.
+    mors: Vec<f64>,
     items: Vec<Item>,
     soft: bool,
     eps0: f64,
     pi0: f64,
 }
 
-impl SurvivalData {
+impl<'a> SurvivalData<'a> {
     /// Units of `evals` (those the binning places, when one is given).
     fn new(
-        loaded: &Loaded,
+        loaded: &'a Loaded,
         table: &CoefficientTable,
         evals: &[RecEval],
         covariate: &str,
         binning: Option<&Binning>,
-    ) -> Result<SurvivalData, DiagnoseError> {
+    ) -> Result<SurvivalData<'a>, DiagnoseError> {
         let cell = |c: u32| loaded.cells[c as usize].expect("reference cell");
         let mut appliers = Vec::with_capacity(evals.len());
+        let mut mors = Vec::with_capacity(evals.len());
         let mut items: Vec<Item> = Vec::new();
         for e in evals {
             let rec = &loaded.recs[e.rec];
             appliers.push(applier(table, loaded, rec, false, 0)?);
-            let a = appliers.len() - 1;
+            mors.push(rec.mor);
+            let a = (appliers.len() - 1) as u32;
             for u in &rec.units {
                 let c = cell(u.cell);
                 let bin = match binning {
@@ -467,15 +467,13 @@ impl SurvivalData {
                     rec.mor,
                 );
                 items.push(Item {
-                    bin,
+                    bin: bin as u32,
                     applier: a,
-                    r: c.cov.range,
-                    rho: c.cov.reflectivity,
-                    kept: u.kept as f64,
-                    trials: u.trials as f64,
+                    cell: u.cell,
+                    kept: u.kept,
+                    trials: u.trials,
                     base,
                     x,
-                    mor: rec.mor,
                 });
             }
         }
@@ -486,7 +484,9 @@ impl SurvivalData {
             .and_then(|w| w.survival.as_ref())
             .map_or((0.0, 0.0), |s| (s.dropout, s.residual));
         Ok(SurvivalData {
+            loaded,
             appliers,
+            mors,
             items,
             soft,
             eps0,
@@ -498,16 +498,21 @@ impl SurvivalData {
     /// factor m through the applier's z at r' = fD + (r − fD)/m, then the
     /// edge's dropout and residual swapped for e's.
     fn prob(&self, it: &Item, f: f64, e: &EdgeRefit) -> f64 {
-        let ap = &self.appliers[it.applier];
+        let ap = &self.appliers[it.applier as usize];
+        let cov = &self.loaded.cells[it.cell as usize]
+            .as_ref()
+            .expect("reference cell")
+            .cov;
+        let (ir, rho) = (cov.range, cov.reflectivity);
         let f = it.base * f;
         let m = e.width_factor;
         let r = if m == 1.0 {
-            it.r
+            ir
         } else {
-            let d = ap.vanishing_distance_m(it.rho) * f;
-            d + (it.r - d) / m
+            let d = ap.vanishing_distance_m(rho) * f;
+            d + (ir - d) / m
         };
-        let p = ap.survival_probability(r, it.rho, f, false);
+        let p = ap.survival_probability(r, rho, f, false);
         let p = if self.soft && (e.dropout != self.eps0 || e.residual != self.pi0) {
             let sf = (p - self.pi0) / (1.0 - self.eps0 - self.pi0);
             e.residual + (1.0 - e.dropout - e.residual) * sf
@@ -519,17 +524,32 @@ impl SurvivalData {
 
     fn nll_item(&self, it: &Item, f: f64, e: &EdgeRefit) -> f64 {
         let p = self.prob(it, f, e);
-        -(it.kept * p.ln() + (it.trials - it.kept) * (1.0 - p).ln())
+        let (k, n) = (it.kept as f64, it.trials as f64);
+        -(k * p.ln() + (n - k) * (1.0 - p).ln())
     }
 
-    /// Σ over `its` in fixed chunks (the same sum on any thread count).
-    fn sum(its: &[Item], g: &(dyn Fn(&Item) -> f64 + Sync)) -> f64 {
+    /// The recording's MOR of an item.
+    fn mor(&self, it: &Item) -> f64 {
+        self.mors[it.applier as usize]
+    }
+
+    /// Σ over the items (`None`: all of them; else those at the indices
+    /// given, in that order) in fixed chunks (the same sum on any thread
+    /// count).
+    fn sum(&self, its: Option<&[u32]>, g: &(dyn Fn(&Item) -> f64 + Sync)) -> f64 {
         use rayon::prelude::*;
-        its.par_chunks(8192)
-            .map(|c| c.iter().map(g).sum::<f64>())
-            .collect::<Vec<f64>>()
-            .iter()
-            .sum()
+        let chunks: Vec<f64> = match its {
+            None => self
+                .items
+                .par_chunks(8192)
+                .map(|c| c.iter().map(g).sum::<f64>())
+                .collect(),
+            Some(ix) => ix
+                .par_chunks(8192)
+                .map(|c| c.iter().map(|&i| g(&self.items[i as usize])).sum::<f64>())
+                .collect(),
+        };
+        chunks.iter().sum()
     }
 
     /// The edge as the table has it.
@@ -545,7 +565,7 @@ impl SurvivalData {
     /// factor `fs` per item.
     fn refit_edge(&self, e: EdgeRefit, fs: &(dyn Fn(&Item) -> f64 + Sync)) -> EdgeRefit {
         let mut e = e;
-        let total = |e: &EdgeRefit| Self::sum(&self.items, &|it| self.nll_item(it, fs(it), e));
+        let total = |e: &EdgeRefit| self.sum(None, &|it| self.nll_item(it, fs(it), e));
         e.width_factor = golden(
             |lm| {
                 total(&EdgeRefit {
@@ -566,25 +586,29 @@ impl SurvivalData {
     /// the soft edge re-fitted with them when `refit_edge` (and the table
     /// has a soft edge).
     fn fit_bins(&self, nb: usize, refit_edge: bool) -> SurvivalFit {
-        let mut by_bin: Vec<Vec<Item>> = vec![Vec::new(); nb];
-        for it in &self.items {
-            by_bin[it.bin].push(*it);
+        // Indices of each bin's items, in item order.
+        let mut by_bin: Vec<Vec<u32>> = vec![Vec::new(); nb];
+        for (i, it) in self.items.iter().enumerate() {
+            by_bin[it.bin as usize].push(i as u32);
         }
         let factors = |e: &EdgeRefit| -> (Vec<Option<f64>>, f64) {
-            let ml = |its: &[Item]| -> f64 {
+            let ml = |its: Option<&[u32]>| -> f64 {
                 golden(
-                    |lf| Self::sum(its, &|it| self.nll_item(it, lf.exp(), e)),
+                    |lf| self.sum(its, &|it| self.nll_item(it, lf.exp(), e)),
                     0.2f64.ln(),
                     5f64.ln(),
                 )
                 .exp()
             };
-            let pooled = ml(&self.items);
+            let pooled = ml(None);
             let v = by_bin
                 .iter()
                 .map(|its| {
-                    let n: f64 = its.iter().map(|i| i.trials).sum();
-                    (n >= MIN_TRIALS).then(|| ml(its))
+                    let n: f64 = its
+                        .iter()
+                        .map(|&i| self.items[i as usize].trials as f64)
+                        .sum();
+                    (n >= MIN_TRIALS).then(|| ml(Some(its)))
                 })
                 .collect();
             (v, pooled)
@@ -596,7 +620,7 @@ impl SurvivalData {
         }
         for _ in 0..2 {
             let fs: Vec<f64> = v.iter().map(|x| x.unwrap_or(pooled)).collect();
-            e = self.refit_edge(e, &|it| fs[it.bin]);
+            e = self.refit_edge(e, &|it| fs[it.bin as usize]);
             (v, pooled) = factors(&e);
         }
         (v, pooled, Some(e))
@@ -608,8 +632,8 @@ impl SurvivalData {
         let ml = |e: &EdgeRefit| {
             golden(
                 |k| {
-                    Self::sum(&self.items, &|it| {
-                        self.nll_item(it, (-k * it.x / it.mor).exp(), e)
+                    self.sum(None, &|it| {
+                        self.nll_item(it, (-k * it.x / self.mor(it)).exp(), e)
                     })
                 },
                 -ATTENUATION_K_MAX,
@@ -622,7 +646,7 @@ impl SurvivalData {
             return (k, None);
         }
         for _ in 0..2 {
-            e = self.refit_edge(e, &|it| (-k * it.x / it.mor).exp());
+            e = self.refit_edge(e, &|it| (-k * it.x / self.mor(it)).exp());
             k = ml(&e);
         }
         (k, Some(e))
@@ -943,14 +967,10 @@ fn fit_parametric(
     let mut pts: Vec<(usize, f64, f64, f64)> = Vec::new();
     for (ri, e) in evals.iter().enumerate() {
         let rec = &loaded.recs[e.rec];
-        let res = if observable == ExtensionObservable::Range {
-            &e.range_residual
-        } else {
-            &e.intensity_residual
-        };
+        let res = e.kept_residuals(loaded, observable);
         for (k, r) in rec.kept.iter().zip(res) {
             if let Some(x) = x_of(covariate, &cell(k.cell).cov, &rec.scan) {
-                pts.push((ri, x, rec.mor, *r));
+                pts.push((ri, x, rec.mor, r));
             }
         }
     }

@@ -136,6 +136,30 @@
 //! step at −6° elevation, seeds 11, 13): the bins are kept (step and
 //! monotone lose by 1 %, paired p 0.0005; attenuation by 70 %).
 //!
+//! **What a test could have found** (issue #13 item 5; [`power`]). Every
+//! finding carries `detectable`: the smallest effect (in the unit of its
+//! `effect`) that its test finds with 80 % power on *this* campaign at the
+//! level the decision uses (α/m, which Holm's step-down always rejects,
+//! and at least the relevance threshold) — so a test that finds nothing
+//! reads "no effect larger than X", and the CLI prints that line for every
+//! test that found nothing. X is the worst step along the covariate (any
+//! edge with at least a quarter of the weight on each side; a category
+//! against the rest), injected into the test's own null draws (the same
+//! sign flips or shuffles of the held-out residuals) in closed form: the
+//! statistic is quadratic, so each draw's statistic with the effect is
+//! `T₀ + 2δX + δ²Q`, and δ is bisected to 80 % of the draws above the
+//! critical value (grown with what the flipped effect adds to the null).
+//! Null with the reason when the test cannot tell: n recordings give 2ⁿ
+//! sign patterns, and p ≥ 2^(1−n), so on a seed-sized rain campaign (11
+//! recordings, about 60 tests) no point-level test can reach α/m; and a
+//! continuous scan-level covariate with at most [`attribution::MAX_DISTINCT_BINS`]
+//! distinct values is binned by value, so on a campaign that small each
+//! recording sits in a bin of its own, which no shuffle changes. The closed form is checked
+//! against the permutation test re-run on simulated data (`power`'s tests)
+//! and against effects hidden at a multiple of the reported X in generated
+//! campaigns (`tests/power.rs`, `examples/power_table.rs`; figures in the
+//! README).
+//!
 //! **Architecture invariant:** the diagnosis reads measured data through
 //! murk-fit's pairing and simulates through murk-infer's applier, so what it
 //! measures is what those tools do; it never re-implements either model.
@@ -148,11 +172,12 @@ pub mod data;
 mod error;
 pub mod evaluate;
 pub mod extend;
+pub mod power;
 mod report;
 pub mod scene;
 pub mod stagewise;
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 
 use murk_campaign::Campaign;
 use murk_fit::{FitParams, FitValidParams};
@@ -171,7 +196,7 @@ pub use report::{
     ShapeParameter, ShapeTried, Step,
 };
 
-use attribution::{Binning, TestOutcome, holm, point_test, scan_test};
+use attribution::{Binning, TestOutcome, holm, point_test_stream, scan_test};
 use data::Loaded;
 use evaluate::{Metrics, RecEval, SimOptions, evaluate};
 use scene::VoxelBox;
@@ -234,6 +259,7 @@ impl Relevance {
 /// | `coefficients` | none | a baseline table to use instead of fitting per fold |
 /// | `point_bins` | 12 | quantile bins of continuous point covariates |
 /// | `scan_bins` | 4 | quantile bins of continuous scan covariates |
+/// | `detectable` | true | compute each test's minimum detectable effect ([`power`]) |
 #[derive(Debug, Clone)]
 pub struct DiagnoseParams {
     weather: WeatherClass,
@@ -248,6 +274,7 @@ pub struct DiagnoseParams {
     coefficients: Option<CoefficientTable>,
     point_bins: usize,
     scan_bins: usize,
+    detectable: bool,
 }
 
 /// Checked [`DiagnoseParams`].
@@ -270,7 +297,14 @@ impl DiagnoseParams {
             coefficients: None,
             point_bins: 12,
             scan_bins: 4,
+            detectable: true,
         }
+    }
+    /// Compute each test's minimum detectable effect ([`power`]); off, the
+    /// findings' `detectable` is null with the reason "not computed".
+    pub fn detectable(mut self, on: bool) -> Self {
+        self.detectable = on;
+        self
     }
     /// Folds by recording.
     pub fn folds(mut self, k: usize) -> Self {
@@ -416,17 +450,20 @@ struct Test {
     point_level: bool,
     binning: Binning,
     outcome: TestOutcome,
+    /// What the test could have found ([`power`]).
+    detectable: power::Detectable,
 }
 
-/// The point-level covariates of a residual unit: a clear return's, or a
-/// count unit's (a laser or an azimuth sector of the ghost and ring returns).
+/// The point-level covariates of a residual unit: a clear return's (its
+/// reference cell's), or a count unit's (a laser, an azimuth sector or a
+/// range bin of the ghost and ring returns).
 #[derive(Debug, Clone, Copy)]
-enum UnitCov {
-    Point(murk_types::PointCovariates),
+enum UnitCov<'a> {
+    Point(&'a murk_types::PointCovariates),
     Count(evaluate::CountCovariates),
 }
 
-impl UnitCov {
+impl UnitCov<'_> {
     fn get(&self, name: &str) -> Option<f64> {
         match self {
             UnitCov::Point(p) => p.get(name),
@@ -435,25 +472,38 @@ impl UnitCov {
     }
 }
 
-/// Residual units of the held-out set, per observable.
+/// The held-out residuals, per observable. Recording-level residuals are
+/// held; point-level ones (a residual per reference cell and per kept
+/// return of every recording, millions in a campaign, and the count units
+/// per laser, sector and range bin) are not: they are produced again from
+/// the evaluations, in the same order, by each test that reads them
+/// ([`point_units`]), so memory does not grow with them.
 struct Residuals {
-    /// (recording index into the pooled list, point covariates, residual, weight).
-    points: BTreeMap<ExtensionObservable, Vec<(usize, UnitCov, f64, f64)>>,
+    /// The observables with point-level residual units.
+    point_level: BTreeSet<ExtensionObservable>,
+    /// Survival, range and intensity, with the number of their units per
+    /// reference cell (grid order): the distribution a point covariate's
+    /// bins are cut from, since such a unit's point covariates are its
+    /// cell's. (Count units are a few per recording: their bins are cut
+    /// from the units themselves.)
+    cell_counts: BTreeMap<ExtensionObservable, Vec<u64>>,
     /// Per recording (pooled order): recording-level residual per observable.
     scans: BTreeMap<ExtensionObservable, Vec<Option<f64>>>,
 }
 
 fn residuals(loaded: &Loaded, evals: &[RecEval]) -> Residuals {
     use ExtensionObservable::*;
-    let mut points: BTreeMap<_, Vec<_>> = BTreeMap::new();
+    let cells = loaded.cells.len();
+    let mut cell_counts: BTreeMap<_, Vec<u64>> = BTreeMap::new();
     let mut scans: BTreeMap<_, Vec<Option<f64>>> = BTreeMap::new();
-    for (i, e) in evals.iter().enumerate() {
+    for e in evals {
         let rec = &loaded.recs[e.rec];
-        let cell = |c: u32| loaded.cells[c as usize].expect("reference cell").cov;
-        let sv = points.entry(Survival).or_default();
+        let sv = cell_counts
+            .entry(Survival)
+            .or_insert_with(|| vec![0; cells]);
         let (mut s, mut w) = (0.0, 0.0);
-        for (u, (r, wt)) in rec.units.iter().zip(e.survival_residuals(rec)) {
-            sv.push((i, UnitCov::Point(cell(u.cell)), r, wt));
+        for (u, (r, wt)) in rec.units.iter().zip(e.survival_residuals(loaded, rec)) {
+            sv[u.cell as usize] += 1;
             s += r * wt;
             w += wt;
         }
@@ -461,24 +511,78 @@ fn residuals(loaded: &Loaded, evals: &[RecEval]) -> Residuals {
             .entry(Survival)
             .or_default()
             .push((w > 0.0).then(|| s / w));
-        for (obs, res) in [
-            (Range, &e.range_residual),
-            (Intensity, &e.intensity_residual),
-        ] {
-            let v = points.entry(obs).or_default();
-            for (k, r) in rec.kept.iter().zip(res) {
-                v.push((i, UnitCov::Point(cell(k.cell)), *r, 1.0));
+        for obs in [Range, Intensity] {
+            let res = &e.kept_residuals(loaded, obs);
+            let v = cell_counts.entry(obs).or_insert_with(|| vec![0; cells]);
+            for (k, _) in rec.kept.iter().zip(res) {
+                v[k.cell as usize] += 1;
             }
             let m = (!res.is_empty()).then(|| res.iter().sum::<f64>() / res.len() as f64);
             scans.entry(obs).or_default().push(m);
         }
         scans.entry(Count).or_default().push(e.count_residual(rec));
-        let cv = points.entry(Count).or_default();
-        for u in e.count_bin_residuals(loaded, rec) {
-            cv.push((i, UnitCov::Count(u.cov), u.residual, u.weight));
-        }
     }
-    Residuals { points, scans }
+    // Every observable has point-level units once there is a recording
+    // (count's are its lasers, sectors and range bins).
+    let point_level = if evals.is_empty() {
+        BTreeSet::new()
+    } else {
+        [Survival, Count, Range, Intensity].into_iter().collect()
+    };
+    Residuals {
+        point_level,
+        cell_counts,
+        scans,
+    }
+}
+
+/// A point-level residual unit: recording (index into the evaluations),
+/// its point covariates, residual, weight.
+type PointUnit<'a> = (usize, UnitCov<'a>, f64, f64);
+
+/// The point-level residual units of `obs`, recording by recording in
+/// pooled order, as the tests read them: per survival unit `kept/trials −
+/// p` weighted by its trials; per kept return its range or intensity
+/// residual weighted 1; per count unit (laser, azimuth sector, range bin)
+/// its log count ratio weighted by its simulated count
+/// ([`RecEval::count_bin_residuals`]).
+fn point_units<'a>(
+    loaded: &'a Loaded,
+    evals: &'a [RecEval],
+    obs: ExtensionObservable,
+) -> Box<dyn Iterator<Item = PointUnit<'a>> + 'a> {
+    let cov = move |c: u32| -> UnitCov<'a> {
+        UnitCov::Point(
+            &loaded.cells[c as usize]
+                .as_ref()
+                .expect("units and pairs are reference cells")
+                .cov,
+        )
+    };
+    let recs = evals.iter().enumerate();
+    match obs {
+        ExtensionObservable::Survival => Box::new(recs.flat_map(move |(i, e)| {
+            let rec = &loaded.recs[e.rec];
+            rec.units
+                .iter()
+                .zip(e.survival_residuals(loaded, rec))
+                .map(move |(u, (r, w))| (i, cov(u.cell), r, w))
+        })),
+        ExtensionObservable::Range | ExtensionObservable::Intensity => {
+            Box::new(recs.flat_map(move |(i, e)| {
+                loaded.recs[e.rec]
+                    .kept
+                    .iter()
+                    .zip(e.kept_residuals(loaded, obs))
+                    .map(move |(k, r)| (i, cov(k.cell), r, 1.0))
+            }))
+        }
+        ExtensionObservable::Count => Box::new(recs.flat_map(move |(i, e)| {
+            e.count_bin_residuals(loaded, &loaded.recs[e.rec])
+                .into_iter()
+                .map(move |u| (i, UnitCov::Count(u.cov), u.residual, u.weight))
+        })),
+    }
 }
 
 /// The seed of one randomised step: murk's one derivation
@@ -518,7 +622,8 @@ struct Baseline {
     tables: Vec<CoefficientTable>,
     /// Held-out recordings of each fold.
     held: Vec<Vec<usize>>,
-    /// Evaluation of every recording by its fold's table, in pooled order.
+    /// Evaluation of every recording by its fold's table, in pooled order
+    /// (taken by the stagewise loop).
     evals: Vec<RecEval>,
 }
 
@@ -632,8 +737,9 @@ impl DiagnoseValidParams {
             local_box: p.local_box,
             seed: seed_of(p.seed, Purpose::DiagnoseSimulate, &["simulate"]),
         };
-        let baseline = self.baseline(&loaded, &folds, &sim, &fit_params)?;
+        let mut baseline = self.baseline(&loaded, &folds, &sim, &fit_params)?;
         let baseline_metrics = Metrics::of(&loaded, &baseline.evals);
+        let evals = std::mem::take(&mut baseline.evals);
         // The table to publish starts from the baseline fitted on every
         // recording (or the table given); without an accepted term it is
         // the baseline itself, so that what follows a diagnosis (`murk
@@ -643,7 +749,7 @@ impl DiagnoseValidParams {
             Some(t) => t.clone(),
             None => self.fit_on(&loaded, &all, &fit_params, "all recordings")?,
         };
-        let sw = self.stagewise(&loaded, &folds, &baseline, &sim, &fit_params, full)?;
+        let sw = self.stagewise(&loaded, &folds, &baseline, evals, &sim, &fit_params, full)?;
         let (extended, gain) = match &sw.metrics {
             Some(m) if !sw.steps.is_empty() => {
                 let mut gains: Vec<Gain> = Vec::new();
@@ -822,6 +928,8 @@ impl DiagnoseValidParams {
                     step: None,
                     rejected: None,
                     profile: t.outcome.profile.clone(),
+                    detectable: t.detectable.effect,
+                    detectable_reason: t.detectable.reason.clone(),
                 }
             })
             .collect();
@@ -921,29 +1029,68 @@ impl DiagnoseValidParams {
             }
         }
         let perms = self.permutations_for(specs.len());
+        let decision = |obs: ExtensionObservable| power::Decision {
+            alpha: p.alpha,
+            tests: specs.len(),
+            threshold: p.relevance.of(obs),
+        };
         specs
             .par_iter()
             .filter_map(|(obs, cov, point)| {
                 let seed = seed_of(p.seed, Purpose::DiagnoseTest, &["test", obs.name(), cov]);
                 if *point {
-                    let units: Vec<(usize, f64, f64, f64)> = res
-                        .points
-                        .get(obs)?
-                        .iter()
-                        .filter_map(|(r, pc, e, w)| pc.get(cov).map(|x| (*r, x, *e, *w)))
-                        .collect();
-                    let xs: Vec<f64> = units.iter().map(|u| u.1).collect();
-                    let binning = Binning::numeric(&xs, p.point_bins);
+                    if !res.point_level.contains(obs) {
+                        return None;
+                    }
+                    let binning = match res.cell_counts.get(obs) {
+                        // The values of the units' cells, each as many
+                        // times as it has units.
+                        Some(counts) => {
+                            let values: Vec<(f64, u64)> = counts
+                                .iter()
+                                .enumerate()
+                                .filter(|(_, n)| **n > 0)
+                                .filter_map(|(c, n)| {
+                                    Some((loaded.cells[c].as_ref()?.cov.get(cov)?, *n))
+                                })
+                                .collect();
+                            Binning::numeric_counted(&values, p.point_bins)
+                        }
+                        // Count units: a few per recording, cut directly.
+                        None => {
+                            let xs: Vec<f64> = point_units(loaded, evals, *obs)
+                                .filter_map(|u| u.1.get(cov))
+                                .collect();
+                            Binning::numeric(&xs, p.point_bins)
+                        }
+                    };
                     if binning.len() < 2 {
                         return None;
                     }
-                    let outcome = point_test(&units, nrec, &binning, perms, seed);
+                    let units = || {
+                        point_units(loaded, evals, *obs)
+                            .filter_map(|(r, pc, e, w)| pc.get(cov).map(|x| (r, x, e, w)))
+                    };
+                    let outcome = point_test_stream(units(), nrec, &binning, perms, seed);
+                    let detectable = if p.detectable {
+                        power::point_detectable(
+                            units(),
+                            nrec,
+                            &binning,
+                            perms,
+                            seed,
+                            decision(*obs),
+                        )
+                    } else {
+                        power::Detectable::not_computed()
+                    };
                     Some(Test {
                         observable: *obs,
                         covariate: cov.clone(),
                         point_level: true,
                         binning,
                         outcome,
+                        detectable,
                     })
                 } else {
                     let scan = res.scans.get(obs)?;
@@ -962,12 +1109,18 @@ impl DiagnoseValidParams {
                         return None;
                     }
                     let outcome = scan_test(&vals, &binning, perms, seed);
+                    let detectable = if p.detectable {
+                        power::scan_detectable(&vals, &binning, perms, seed, decision(*obs))
+                    } else {
+                        power::Detectable::not_computed()
+                    };
                     Some(Test {
                         observable: *obs,
                         covariate: cov.clone(),
                         point_level: false,
                         binning,
                         outcome,
+                        detectable,
                     })
                 }
             })
@@ -1083,37 +1236,31 @@ impl DiagnoseValidParams {
         };
         let scan_of = |r: usize| &loaded.recs[evals[r].rec].scan;
         let b_scan = |r: usize| prof(scan_of(r).get(&b.covariate).and_then(|v| b.binning.of(v)));
-        match res.points.get(&a.observable) {
+        match res.point_level.contains(&a.observable) {
             // A scan-level count test keeps the recording's own count
             // residual: a point-level count profile is centred per
             // recording, so removing it leaves that residual as it is.
-            Some(pts)
-                if a.point_level
-                    || (b.point_level && a.observable != ExtensionObservable::Count) =>
+            true if a.point_level
+                || (b.point_level && a.observable != ExtensionObservable::Count) =>
             {
                 // Point residuals with b removed.
-                let adj: Vec<(usize, UnitCov, f64, f64)> = pts
-                    .iter()
-                    .map(|(r, pc, e, w)| {
-                        let off = if b.point_level {
-                            prof(pc.get(&b.covariate).and_then(|x| b.binning.of_number(x)))
-                        } else {
-                            b_scan(*r)
-                        };
-                        (*r, *pc, e - off, *w)
-                    })
-                    .collect();
+                let adj = point_units(loaded, evals, a.observable).map(|(r, pc, e, w)| {
+                    let off = if b.point_level {
+                        prof(pc.get(&b.covariate).and_then(|x| b.binning.of_number(x)))
+                    } else {
+                        b_scan(r)
+                    };
+                    (r, pc, e - off, w)
+                });
                 if a.point_level {
-                    let units: Vec<(usize, f64, f64, f64)> = adj
-                        .iter()
-                        .filter_map(|(r, pc, e, w)| pc.get(&a.covariate).map(|x| (*r, x, *e, *w)))
-                        .collect();
-                    point_test(&units, nrec, &a.binning, perms, seed)
+                    let units =
+                        adj.filter_map(|(r, pc, e, w)| pc.get(&a.covariate).map(|x| (r, x, e, w)));
+                    point_test_stream(units, nrec, &a.binning, perms, seed)
                 } else {
                     let mut s = vec![(0.0f64, 0.0f64); nrec];
-                    for (r, _, e, w) in &adj {
-                        s[*r].0 += e * w;
-                        s[*r].1 += w;
+                    for (r, _, e, w) in adj {
+                        s[r].0 += e * w;
+                        s[r].1 += w;
                     }
                     let vals: Vec<(&CovariateValue, f64)> = (0..nrec)
                         .filter(|&r| s[r].1 > 0.0)

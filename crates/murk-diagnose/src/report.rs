@@ -91,6 +91,17 @@ pub struct Finding {
     pub rejected: Option<String>,
     /// Mean residual per bin of the covariate.
     pub profile: Vec<ProfileBin>,
+    /// The smallest effect (same unit as `effect`) this test finds with
+    /// 80 % power on this campaign at the level the decision uses
+    /// ([`crate::power`]): a test that finds nothing says "nothing larger
+    /// than this". Null when the test cannot tell (`detectable_reason`
+    /// says why), and in reports written before the field.
+    #[serde(default)]
+    pub detectable: Option<f64>,
+    /// Why `detectable` is null (too few recordings for the null to reach
+    /// the level, say).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub detectable_reason: Option<String>,
 }
 
 /// The extended model: every accepted term together.
@@ -290,7 +301,7 @@ impl FigureData {
         seed: u64,
     ) -> Result<FigureData, DiagnoseError> {
         let rec = &loaded.recs[j];
-        let clear = &loaded.clear[rec.clear].cloud;
+        let clear = &loaded.clear[rec.clear].read(&loaded.spec)?;
         let ap = applier(table, loaded, rec, true, seed)?;
         let (out, _) = ap
             .apply(clear, &format!("{}#figure", rec.id))
@@ -311,7 +322,7 @@ impl FigureData {
 /// The method, in words, for the report.
 pub fn method_text(permutations: usize, alpha: f64, r: &Relevance) -> String {
     format!(
-        "Residual = measured − simulated on held-out recordings. Point-level covariates: residuals centred per recording, binned; null by flipping the sign of whole recordings ({permutations} draws). Scan-level covariates: one residual per recording, binned; null by shuffling the covariate across recordings ({permutations} draws). Strength = RMS of the binned profile beyond its null mean, over the relevance threshold (survival {} keep probability, count {} log ratio, range {} m, intensity {} log ratio). Significant = Holm-adjusted p < {alpha} over all tests and effect ≥ threshold; a weaker covariate of the same observable is re-tested after removing the strongest one's profile; a weather.csv column that reads the recording's MOR (|r| ≥ {mor_r} on log values) is one quantity with mor. Stagewise: the candidates of the strongest observable each get a term fitted per fold on the fit set; the one with the largest held-out gain is accepted when a paired sign-flip test over held-out recordings (per-recording loss before − after, one-sided) gives p < {alpha}; the model is re-evaluated, every test re-run, and the next term added, until nothing significant is left or {steps} steps. A significant finding is kept only when its term is accepted; one that disappears after a step is explained by that step's covariate.",
+        "Residual = measured − simulated on held-out recordings. Point-level covariates: residuals centred per recording, binned; null by flipping the sign of whole recordings ({permutations} draws). Scan-level covariates: one residual per recording, binned; null by shuffling the covariate across recordings ({permutations} draws). Strength = RMS of the binned profile beyond its null mean, over the relevance threshold (survival {} keep probability, count {} log ratio, range {} m, intensity {} log ratio). Significant = Holm-adjusted p < {alpha} over all tests and effect ≥ threshold; a weaker covariate of the same observable is re-tested after removing the strongest one's profile; a weather.csv column that reads the recording's MOR (|r| ≥ {mor_r} on log values) is one quantity with mor. Stagewise: the candidates of the strongest observable each get a term fitted per fold on the fit set; the one with the largest held-out gain is accepted when a paired sign-flip test over held-out recordings (per-recording loss before − after, one-sided) gives p < {alpha}; the model is re-evaluated, every test re-run, and the next term added, until nothing significant is left or {steps} steps. A significant finding is kept only when its term is accepted; one that disappears after a step is explained by that step's covariate. Detectable = the smallest step along the covariate (worst edge with ≥ 1/4 of the weight on each side) the test finds with 80 % power at α/m and ≥ the threshold, from the test's own null draws; null with the reason when the test cannot tell.",
         r.survival,
         r.count,
         r.range,
@@ -463,6 +474,8 @@ mod tests {
                     weight: 300.0,
                     recordings: 6,
                 }],
+                detectable: Some(0.03),
+                detectable_reason: None,
             };
             let json = serde_json::to_value(&f).unwrap();
             let want = serde_json::json!({
@@ -472,9 +485,15 @@ mod tests {
                 "p_adjusted": 0.01, "recordings": 12,
                 "profile": [{"label": "wet", "mean_residual": 0.04, "weight": 300.0,
                              "recordings": 6}],
+                "detectable": 0.03,
             });
             assert_eq!(json, want);
-            assert_eq!(serde_json::from_value::<Finding>(json).unwrap(), f);
+            assert_eq!(serde_json::from_value::<Finding>(json.clone()).unwrap(), f);
+            // A report written before `detectable` reads back with none.
+            let mut old = json;
+            old.as_object_mut().unwrap().remove("detectable");
+            let back = serde_json::from_value::<Finding>(old).unwrap();
+            assert_eq!((back.detectable, back.detectable_reason), (None, None));
             assert_eq!(observable.to_string(), obs_name);
             assert_eq!(level.to_string(), level_name);
             expected.push(f);

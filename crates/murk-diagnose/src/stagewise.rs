@@ -82,7 +82,7 @@ pub fn recording_loss(loaded: &Loaded, e: &RecEval, obs: ExtensionObservable) ->
     match obs {
         ExtensionObservable::Survival => {
             let (mut ll, mut n) = (0.0, 0.0);
-            for (u, &p) in rec.units.iter().zip(&e.p) {
+            for (u, p) in rec.units.iter().zip(e.p(loaded)) {
                 let p = p.clamp(P_FLOOR, 1.0 - P_FLOOR);
                 let (k, t) = (u.kept as f64, u.trials as f64);
                 ll -= k * p.ln() + (t - k) * (1.0 - p).ln();
@@ -90,8 +90,8 @@ pub fn recording_loss(loaded: &Loaded, e: &RecEval, obs: ExtensionObservable) ->
             }
             (n > 0.0).then(|| ll / n)
         }
-        ExtensionObservable::Range => mean_sq(e.range_residual.as_slice()),
-        ExtensionObservable::Intensity => mean_sq(e.intensity_residual.as_slice()),
+        ExtensionObservable::Range => mean_sq(&e.range_residuals(loaded)),
+        ExtensionObservable::Intensity => mean_sq(&e.intensity_residuals(loaded)),
         ExtensionObservable::Count => e.count_residual(rec).map(f64::abs),
     }
 }
@@ -189,13 +189,16 @@ pub(crate) fn term_text(
 
 impl DiagnoseValidParams {
     /// The stagewise loop (module docs). `full` is the baseline fitted on
-    /// every recording (or the table given).
+    /// every recording (or the table given); `evals` are the baseline's
+    /// evaluations (taken from `baseline`, not copied: they are the largest
+    /// thing a diagnosis holds).
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn stagewise(
         &self,
         loaded: &Loaded,
         folds: &Folds,
         baseline: &Baseline,
+        evals: Vec<RecEval>,
         sim: &SimOptions,
         fit_params: &FitValidParams,
         mut full: CoefficientTable,
@@ -203,7 +206,7 @@ impl DiagnoseValidParams {
         let p = &self.0;
         let aliases = crate::aliases::of_loaded(loaded);
         let mut tables = baseline.tables.clone();
-        let mut evals = baseline.evals.clone();
+        let mut evals = evals;
         let mut steps: Vec<Step> = Vec::new();
         let mut accepted: Vec<(usize, Key)> = Vec::new();
         let mut rejected: Vec<Rejected> = Vec::new();

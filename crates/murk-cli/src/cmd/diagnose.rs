@@ -144,6 +144,16 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             f.cause
         );
     }
+    // What the tests that found nothing could have found.
+    let power = r.power_summary();
+    if !power.is_empty() {
+        outln!(
+            "not found, with what each test could have found on this campaign (worst step along the covariate, α/m per test):"
+        );
+        for line in &power {
+            outln!("  {line}");
+        }
+    }
     for (i, st) in r.steps.iter().enumerate() {
         let params: Vec<String> = st
             .parameters
