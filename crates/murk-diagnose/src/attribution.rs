@@ -48,8 +48,20 @@ use rand::{RngExt, SeedableRng};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
-/// Distinct values up to which a numeric covariate is binned by value.
+/// Distinct values up to which a numeric point-level covariate is binned by
+/// value (scan-level covariates: see [`Binning::scan`]).
 pub const MAX_DISTINCT_BINS: usize = 24;
+
+/// Edges of up to `bins` equal-count bins of the sorted finite `v` (not
+/// empty): the values at the `k·n/bins` positions, without repeats, and
+/// none at the smallest value (it would leave bin 0 empty).
+fn quantile_edges(v: &[f64], bins: usize) -> Vec<f64> {
+    let n = v.len();
+    let mut e: Vec<f64> = (1..bins).map(|k| v[(k * n / bins).min(n - 1)]).collect();
+    e.dedup();
+    e.retain(|x| *x > v[0]);
+    e
+}
 
 /// How a covariate's values are grouped.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -79,14 +91,7 @@ impl Binning {
         let edges = if distinct.len() <= MAX_DISTINCT_BINS.max(quantile_bins) {
             distinct.windows(2).map(|w| 0.5 * (w[0] + w[1])).collect()
         } else {
-            let n = v.len();
-            let mut e: Vec<f64> = (1..quantile_bins)
-                .map(|k| v[(k * n / quantile_bins).min(n - 1)])
-                .collect();
-            e.dedup();
-            // Edges equal to the smallest value would leave bin 0 empty.
-            e.retain(|x| *x > v[0]);
-            e
+            quantile_edges(&v, quantile_bins)
         };
         Binning::Numeric { edges }
     }
@@ -150,7 +155,9 @@ impl Binning {
     }
 
     /// Bins for scan-level values (one per recording): categories for text,
-    /// distinct values when few, else `bins` quantile bins.
+    /// one bin per distinct value when there are at most `bins`, else
+    /// `bins` equal-count (quantile) bins — ties can merge some, so fewer
+    /// is possible, never more.
     pub fn scan(values: &[&CovariateValue], bins: usize) -> Binning {
         if values.iter().any(|v| matches!(v, CovariateValue::Text(_))) {
             return Binning::categories(values.iter().map(|v| match v {
@@ -165,15 +172,21 @@ impl Binning {
                 CovariateValue::Text(_) => None,
             })
             .collect();
-        let mut distinct = nums.clone();
-        distinct.sort_by(f64::total_cmp);
+        let mut sorted: Vec<f64> = nums.into_iter().filter(|x| x.is_finite()).collect();
+        sorted.sort_by(f64::total_cmp);
+        let mut distinct = sorted.clone();
         distinct.dedup();
-        if distinct.len() <= bins {
-            return Binning::Numeric {
-                edges: distinct.windows(2).map(|w| 0.5 * (w[0] + w[1])).collect(),
-            };
-        }
-        Binning::numeric(&nums, bins)
+        let edges = if distinct.len() <= bins {
+            distinct.windows(2).map(|w| 0.5 * (w[0] + w[1])).collect()
+        } else {
+            // Never by value past `bins` (unlike a point covariate, whose
+            // values each hold many returns): a continuous weather reading
+            // has one value per recording, so on a campaign of up to
+            // `MAX_DISTINCT_BINS` recordings each would sit in a bin of its
+            // own, which no shuffle changes — the test could never tell.
+            quantile_edges(&sorted, bins)
+        };
+        Binning::Numeric { edges }
     }
 
     /// Number of bins.
@@ -576,6 +589,50 @@ mod tests {
         }
         let t = scan_test(&shuffled, &b, 999, 1);
         assert!(t.p_value > 0.01, "{}", t.p_value);
+    }
+
+    #[test]
+    fn scan_bins_continuous_readings_by_quantile_on_small_campaigns() {
+        // 16 recordings, one continuous reading each (all distinct, as a
+        // temperature column is): 4 equal-count bins, never one per
+        // recording, so the shuffle test can see a trend along it.
+        let mut g = 21;
+        let temps: Vec<CovariateValue> = (0..16)
+            .map(|i| CovariateValue::Number(-5.0 + i as f64 * 0.37 + lcg(&mut g) * 0.01))
+            .collect();
+        let vals: Vec<(&CovariateValue, f64)> = temps
+            .iter()
+            .enumerate()
+            .map(|(i, v)| (v, 0.02 * i as f64 + lcg(&mut g) * 0.02))
+            .collect();
+        let vs: Vec<&CovariateValue> = vals.iter().map(|v| v.0).collect();
+        let b = Binning::scan(&vs, 4);
+        assert_eq!(b.len(), 4, "{b:?}");
+        let mut counts = [0; 4];
+        for v in &vs {
+            counts[b.of(v).unwrap()] += 1;
+        }
+        assert_eq!(counts, [4; 4]);
+        let t = scan_test(&vals, &b, 999, 3);
+        assert!(t.p_value < 0.01, "{}", t.p_value);
+        // Few distinct values: still one bin per value.
+        let few: Vec<CovariateValue> = (0..16)
+            .map(|i| CovariateValue::Number((i % 3) as f64))
+            .collect();
+        let vs: Vec<&CovariateValue> = few.iter().collect();
+        assert_eq!(Binning::scan(&vs, 4).len(), 3);
+        // Ties at a quantile merge bins instead of leaving one empty.
+        let tied: Vec<CovariateValue> = (0..16)
+            .map(|i| CovariateValue::Number(if i < 10 { 1.0 } else { i as f64 }))
+            .collect();
+        let vs: Vec<&CovariateValue> = tied.iter().collect();
+        let b = Binning::scan(&vs, 4);
+        let mut counts = vec![0; b.len()];
+        for v in &vs {
+            counts[b.of(v).unwrap()] += 1;
+        }
+        assert!(counts.iter().all(|&c| c > 0), "{counts:?}");
+        assert!(b.len() >= 2 && b.len() <= 4, "{b:?}");
     }
 
     #[test]

@@ -152,9 +152,11 @@
 //! Null with the reason when the test cannot tell: n recordings give 2ⁿ
 //! sign patterns, and p ≥ 2^(1−n), so on a seed-sized rain campaign (11
 //! recordings, about 60 tests) no point-level test can reach α/m; and a
-//! continuous scan-level covariate with at most [`attribution::MAX_DISTINCT_BINS`]
-//! distinct values is binned by value, so on a campaign that small each
-//! recording sits in a bin of its own, which no shuffle changes. The closed form is checked
+//! scan-level test whose recordings each sit in a bin of their own (a
+//! covariate with as many distinct values as recordings, all at most
+//! `scan_bins`), which no shuffle changes. A continuous scan covariate with
+//! more distinct values than `scan_bins` gets that many equal-count bins
+//! ([`attribution::Binning::scan`]). The closed form is checked
 //! against the permutation test re-run on simulated data (`power`'s tests)
 //! and against effects hidden at a multiple of the reported X in generated
 //! campaigns (`tests/power.rs`, `examples/power_table.rs`; figures in the
