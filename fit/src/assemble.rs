@@ -508,16 +508,26 @@ fn bend_and_check(
     let folds = p.edge_test_folds();
     let all: Vec<&RecordingTrials> = recs.iter().collect();
     let fitted: Vec<bool> = bands.iter().map(|b| b.slope.is_some()).collect();
-    let powers = fit_powers(&all, &fitted, opts, bin);
-    let all_fitted = powers.iter().zip(&fitted).all(|(p, f)| !*f || p.is_some());
-    let evidence = compare_laws(
-        recs,
-        &fitted,
-        opts,
-        bin,
-        folds as usize,
-        seed("law-choice", ""),
-    );
+    let (powers, evidence) = if p.compare_laws() {
+        (
+            fit_powers(&all, &fitted, opts, bin),
+            compare_laws(
+                recs,
+                &fitted,
+                opts,
+                bin,
+                folds as usize,
+                seed("law-choice", ""),
+            ),
+        )
+    } else {
+        (
+            vec![None; fitted.len()],
+            Err("the laws were not compared (compare_laws is off): the line is kept".to_string()),
+        )
+    };
+    let all_fitted =
+        p.compare_laws() && powers.iter().zip(&fitted).all(|(p, f)| !*f || p.is_some());
     let wins = all_fitted && matches!(&evidence, Ok(e) if e.gain > 0.0 && e.p <= alpha);
     let bent = wins && p.apply_bend();
     let choice = LawChoice {
@@ -556,6 +566,7 @@ fn bend_and_check(
         alpha,
         folds,
         reason: match (all_fitted, &evidence) {
+            (_, Err(e)) if !p.compare_laws() => Some(e.clone()),
             (false, _) => Some("the power law could not be fitted in every band".into()),
             (_, Err(e)) => Some(e.clone()),
             _ if wins && !bent => Some(

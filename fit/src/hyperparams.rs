@@ -49,6 +49,14 @@ impl Band {
     }
 }
 
+fn yes() -> bool {
+    true
+}
+
+fn is_yes(b: &bool) -> bool {
+    *b
+}
+
 /// Hyperparameters of a fit, before checking.
 ///
 /// | Name | Default | Purpose | Range |
@@ -73,6 +81,7 @@ impl Band {
 /// | `edge_test_folds` | 5 | folds over recordings of the held-out test of the edge model against survival by range alone (a slope is reported only when the edge predicts held-out recordings better) | 2–50 |
 /// | `require_edge` | true | report a slope only where the held-out edge test sees an edge, null with the test's reason otherwise (false: the slope is kept and the verdict goes in the band's `reason` as a warning). The test's null is "the weather does nothing": each return's clear survival, measured on the clear recordings, times one rate (see `EdgeTest` in murk-types) | |
 /// | `apply_bend` | false | write the bending law `a·MOR^b` into a band (`law`, used by `murk apply` and `murk diagnose`) when it predicts held-out recordings better than the line (`law_choice` records the comparison either way). Off by default: on a generated campaign whose survival depends on the beam's elevation (linear truth in r/MOR), the pooled data bend (exponents 1.14 and 1.4, held-out p 1e-5), and `murk diagnose` then reports survival × MOR falsely; a bend chosen from pooled recordings cannot tell a law that bends from a covariate left out | |
+/// | `compare_laws` | true | compare the bending law with the line on held-out recordings in every band with a slope (the band's `law_choice`: exponents, their intervals, the held-out gain); false skips it — about 370 survival fits per weather, most of a fit's time — and `law_choice` says it was not compared. `murk diagnose` turns it off for its per-fold baselines, which only need the applied law. Must be true with `apply_bend` | |
 /// | `edge_test_alpha` | 0.01 | level of the one-sided sign-flip test of the held-out gains over recordings (an edge needs at least ⌈log₂(1/α)⌉ recordings: 7 at 1 %) | (0, 0.5] |
 /// | `survival_log_step` | 0.01 | bin width of ln(r / MOR) in the survival histogram (1 % in range: far finer than any edge or slope the data resolve) | (0, 0.1] |
 /// | `reflectivity_floor` | 0 | lower truncation of the ghost/ring reflectivity laws | finite |
@@ -108,6 +117,10 @@ pub struct FitValidParams {
     pub(crate) require_edge: bool,
     #[serde(default)]
     pub(crate) apply_bend: bool,
+    // Left out of the JSON when on (the default), so the parameters of
+    // every state and table written before it existed hash the same.
+    #[serde(default = "yes", skip_serializing_if = "is_yes")]
+    pub(crate) compare_laws: bool,
     pub(crate) edge_test_alpha: f64,
     pub(crate) survival_log_step: f64,
     pub(crate) reflectivity_floor: f64,
@@ -141,6 +154,7 @@ impl Default for FitParams {
             edge_test_folds: 5,
             require_edge: true,
             apply_bend: false,
+            compare_laws: true,
             edge_test_alpha: 0.01,
             survival_log_step: 0.01,
             reflectivity_floor: 0.0,
@@ -209,6 +223,8 @@ impl FitParams {
         require_edge: bool);
     setter!(/// Sets `apply_bend`.
         apply_bend: bool);
+    setter!(/// Sets `compare_laws`.
+        compare_laws: bool);
     setter!(/// Sets `edge_test_alpha`.
         edge_test_alpha: f64);
     setter!(/// Sets `survival_log_step`.
@@ -328,6 +344,13 @@ impl FitParams {
                 "edge_test_folds",
                 p.edge_test_folds.to_string(),
                 "must lie in 2–50",
+            );
+        }
+        if p.apply_bend && !p.compare_laws {
+            return bad(
+                "compare_laws",
+                "false".into(),
+                "apply_bend needs the held-out comparison that chooses the law",
             );
         }
         if !(p.edge_test_alpha > 0.0 && p.edge_test_alpha <= 0.5) {
@@ -455,6 +478,11 @@ impl FitValidParams {
     /// `apply_bend`.
     pub fn apply_bend(&self) -> bool {
         self.apply_bend
+    }
+
+    /// `compare_laws`.
+    pub fn compare_laws(&self) -> bool {
+        self.compare_laws
     }
 
     /// `edge_test_alpha`.

@@ -339,3 +339,123 @@ fn linear_truth_keeps_the_line_in_most_seeds() {
     );
     assert!(n > 0 && kept * 4 >= n * 3, "line kept in {kept} of {n}");
 }
+
+/// `compare_laws` off (what `murk diagnose` uses for its per-fold
+/// baselines) skips only the law comparison: on two sources (murk's
+/// generator; the physics fog on the real scene when present) every other
+/// number of the table is the same as with it on, and `law_choice` says
+/// the laws were not compared. With `apply_bend` on it is refused.
+#[test]
+fn without_the_law_comparison_the_table_differs_only_in_law_choice() {
+    let strip = |t: &FittedTable| {
+        let mut v: serde_json::Value = serde_json::from_str(&t.table().to_json().unwrap()).unwrap();
+        let mut choices = Vec::new();
+        for (_, w) in v["weathers"].as_object_mut().unwrap().iter_mut() {
+            choices.push(w["law_choice"].take());
+        }
+        // The parameters say it (only when off).
+        let params = v["provenance"]["parameters"].as_object_mut().unwrap();
+        let said = params.remove("compare_laws");
+        (v, choices, said)
+    };
+    // The first path where two JSON values differ.
+    fn first_difference(
+        a: &serde_json::Value,
+        b: &serde_json::Value,
+        at: String,
+    ) -> Option<String> {
+        use serde_json::Value::{Array, Object};
+        match (a, b) {
+            (Object(x), Object(y)) => {
+                let keys: std::collections::BTreeSet<&String> = x.keys().chain(y.keys()).collect();
+                keys.into_iter().find_map(|k| match (x.get(k), y.get(k)) {
+                    (Some(p), Some(q)) => first_difference(p, q, format!("{at}.{k}")),
+                    _ => Some(format!("{at}.{k}")),
+                })
+            }
+            (Array(x), Array(y)) if x.len() == y.len() => x
+                .iter()
+                .zip(y)
+                .enumerate()
+                .find_map(|(i, (p, q))| first_difference(p, q, format!("{at}[{i}]"))),
+            _ => (a != b).then(|| format!("{at}: {a} vs {b}")),
+        }
+    }
+    let check = |path: &Path, mor_bin_m: f64, what: &str| {
+        let campaign = Campaign::open(path).unwrap();
+        let fit = |compare: bool| {
+            FitParams::default()
+                .bootstrap_replicates(0)
+                .mor_bin_width_m(mor_bin_m)
+                .compare_laws(compare)
+                .check()
+                .unwrap()
+                .fit(&campaign)
+                .unwrap()
+        };
+        let (on, on_choices, on_said) = strip(&fit(true));
+        let (off, off_choices, off_said) = strip(&fit(false));
+        assert_eq!(on_said, None, "{what}");
+        assert_eq!(off_said, Some(serde_json::Value::Bool(false)), "{what}");
+        assert_eq!(
+            first_difference(&on, &off, String::new()),
+            None,
+            "{what}: the tables differ outside law_choice"
+        );
+        let mut compared = 0;
+        for (a, b) in on_choices.iter().zip(&off_choices) {
+            if a.is_null() {
+                assert!(b.is_null(), "{what}: {b}");
+                continue;
+            }
+            compared += 1;
+            assert_eq!(b["chosen"], "linear", "{what}: {b}");
+            assert!(
+                b["reason"].as_str().unwrap().contains("not compared"),
+                "{what}: {b}"
+            );
+            assert!(
+                b["exponents"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .all(|e| e.is_null()),
+                "{b}"
+            );
+            assert!(
+                a["exponents"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .any(|e| !e.is_null()),
+                "{a}"
+            );
+        }
+        assert!(compared > 0, "{what}: no weather had a law to compare");
+    };
+    for seed in [2u64, 3] {
+        let mut c = GeneratorConfig::preset(Preset::Small);
+        c.campaign.recordings = 60;
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("campaign");
+        Generator::new(c)
+            .unwrap()
+            .write_campaign(seed, &OutputOptions::new(&path))
+            .unwrap();
+        check(&path, 10.0, &format!("generator seed {seed}"));
+    }
+    if let Some(capture) = capture() {
+        let dir = tempfile::tempdir().unwrap();
+        semi_real::vlp16_campaign(&capture, dir.path(), &physics_cfg(), 5).unwrap();
+        check(dir.path(), PHYSICS_MOR_BIN_M, "physics fog");
+    } else {
+        eprintln!("SKIP physics-fog half: ../shared/data/real is absent");
+    }
+    let refused = FitParams::default()
+        .apply_bend(true)
+        .compare_laws(false)
+        .check()
+        .unwrap_err()
+        .to_string();
+    assert!(refused.contains("compare_laws"), "{refused}");
+}
