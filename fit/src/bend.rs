@@ -21,6 +21,7 @@
 //! No I/O; every random step is seeded by `murk_types::seed`.
 
 use rand::{RngExt, SeedableRng, rngs::ChaCha8Rng};
+use rayon::prelude::*;
 
 use crate::hyperparams::EdgeShape;
 use crate::survival::{
@@ -132,7 +133,9 @@ pub fn fit_powers(
     opts: &SurvivalOptions,
     bin: Binning,
 ) -> Vec<Option<PowerFit>> {
+    // Bands in parallel (each its own profile search; order kept).
     (0..fitted.len())
+        .into_par_iter()
         .map(|i| {
             fitted[i]
                 .then(|| fit_power(recs, fitted.len(), i, opts, bin))
@@ -181,62 +184,74 @@ pub fn compare_laws(
     let mors: Vec<f64> = recs.iter().map(|r| r.mor).collect();
     let fold_of = crate::stats::interleaved_folds(&mors, folds);
     let lp = |p: f64| p.clamp(1e-12, 1.0 - 1e-12);
-    let mut gains = Vec::new();
-    let mut fold_exponents = Vec::with_capacity(folds);
-    for f in 0..folds {
-        let train: Vec<&RecordingTrials> = (0..g_n)
-            .filter(|&g| fold_of[g] != f)
-            .map(|g| &recs[g])
-            .collect();
-        // The line with the same per-band freedom (edge width, ε, π) as the
-        // power law, so the comparison weighs the exponent alone.
-        let lines: Vec<Option<SurvivalResult>> = (0..n_bands)
-            .map(|b| {
-                fitted[b]
-                    .then(|| fit_band_at(&train, n_bands, b, 1.0, opts, bin))
-                    .flatten()
-            })
-            .collect();
-        let powers = fit_powers(&train, fitted, opts, bin);
-        if powers.iter().zip(fitted).any(|(p, f)| *f && p.is_none()) {
-            return Err(
-                "the power law could not be fitted with a fold of recordings left out".into(),
-            );
-        }
-        fold_exponents.push(
-            powers
+    // Each fold's fits and its recordings' gains, folds in parallel: every
+    // fold's work depends on the recordings alone, and the gains are put
+    // back in fold order, so the result is the same on any thread count.
+    type Fold = Result<(Vec<Option<f64>>, Vec<f64>), String>;
+    let per_fold: Vec<Fold> = (0..folds)
+        .into_par_iter()
+        .map(|f| {
+            let train: Vec<&RecordingTrials> = (0..g_n)
+                .filter(|&g| fold_of[g] != f)
+                .map(|g| &recs[g])
+                .collect();
+            // The line with the same per-band freedom (edge width, ε, π) as the
+            // power law, so the comparison weighs the exponent alone.
+            let lines: Vec<Option<SurvivalResult>> = (0..n_bands)
+                .map(|b| {
+                    fitted[b]
+                        .then(|| fit_band_at(&train, n_bands, b, 1.0, opts, bin))
+                        .flatten()
+                })
+                .collect();
+            let powers = fit_powers(&train, fitted, opts, bin);
+            if powers.iter().zip(fitted).any(|(p, f)| *f && p.is_none()) {
+                return Err(
+                    "the power law could not be fitted with a fold of recordings left out".into(),
+                );
+            }
+            let exponents = powers
                 .iter()
                 .map(|p| p.as_ref().map(|p| p.exponent))
-                .collect(),
-        );
-        for g in (0..g_n).filter(|&g| fold_of[g] == f) {
-            let r = &recs[g];
-            let mut d = 0.0;
-            let mut any = false;
-            for (b, power) in powers.iter().enumerate() {
-                let (Some(power), Some(line)) = (power, &lines[b]) else {
-                    continue;
-                };
-                let shift = (1.0 - power.exponent) * r.mor.ln();
-                for o in &r.bands[b] {
-                    let (Some(pl), Some(pp)) = (
-                        line.keep_probability(opts, b, o.u),
-                        power
-                            .fit
-                            .keep_probability(opts, b, (o.u.ln() + shift).exp()),
-                    ) else {
+                .collect();
+            let mut gains = Vec::new();
+            for g in (0..g_n).filter(|&g| fold_of[g] == f) {
+                let r = &recs[g];
+                let mut d = 0.0;
+                let mut any = false;
+                for (b, power) in powers.iter().enumerate() {
+                    let (Some(power), Some(line)) = (power, &lines[b]) else {
                         continue;
                     };
-                    let (pl, pp) = (lp(pl), lp(pp));
-                    any = true;
-                    d += o.kept * (pp / pl).ln()
-                        + (o.total - o.kept) * ((1.0 - pp) / (1.0 - pl)).ln();
+                    let shift = (1.0 - power.exponent) * r.mor.ln();
+                    for o in &r.bands[b] {
+                        let (Some(pl), Some(pp)) = (
+                            line.keep_probability(opts, b, o.u),
+                            power
+                                .fit
+                                .keep_probability(opts, b, (o.u.ln() + shift).exp()),
+                        ) else {
+                            continue;
+                        };
+                        let (pl, pp) = (lp(pl), lp(pp));
+                        any = true;
+                        d += o.kept * (pp / pl).ln()
+                            + (o.total - o.kept) * ((1.0 - pp) / (1.0 - pl)).ln();
+                    }
+                }
+                if any {
+                    gains.push(d);
                 }
             }
-            if any {
-                gains.push(d);
-            }
-        }
+            Ok((exponents, gains))
+        })
+        .collect();
+    let mut gains = Vec::new();
+    let mut fold_exponents = Vec::with_capacity(folds);
+    for f in per_fold {
+        let (exponents, g) = f?;
+        fold_exponents.push(exponents);
+        gains.extend(g);
     }
     let n = gains.len();
     if n < 3 {

@@ -27,6 +27,7 @@
 //! locates the edge from the kept/lost ratio at each `u`, which does not depend
 //! on how many clear returns the scene offers there.
 
+use rayon::prelude::*;
 use std::ops::Range;
 
 use crate::hyperparams::{Band, EdgeShape};
@@ -885,7 +886,7 @@ pub fn edge_test(
     pooled: &SurvivalHistogram,
     recordings: &[RecordingTrials],
     band_classes: &[Range<usize>],
-    remove: &dyn Fn(usize, &mut SurvivalHistogram),
+    remove: &(dyn Fn(usize, &mut SurvivalHistogram) + Sync),
     opts: &SurvivalOptions,
     folds: usize,
     seed: [u8; 32],
@@ -933,16 +934,24 @@ pub fn edge_test(
     // few clear recordings, and one return lost where a model says
     // "certainly kept" would otherwise cost 27 nats and decide the test.
     let lp = |p: f64| p.clamp(PREDICTION_FLOOR, 1.0 - PREDICTION_FLOOR);
-    for f in 0..folds {
-        let mut train = pooled.clone();
-        for g in (0..g_n).filter(|&g| fold_of[g] == f) {
-            remove(g, &mut train);
-        }
-        let obs: Vec<Vec<Obs>> = band_classes
-            .iter()
-            .map(|c| train.observations(c.clone()))
-            .collect();
-        let fit = fit_survival(&obs, opts);
+    // The edge model of each fold, folds in parallel (each depends on the
+    // recordings alone; the rest runs in fold order, so the result is the
+    // same on any thread count).
+    let fits: Vec<Option<SurvivalResult>> = (0..folds)
+        .into_par_iter()
+        .map(|f| {
+            let mut train = pooled.clone();
+            for g in (0..g_n).filter(|&g| fold_of[g] == f) {
+                remove(g, &mut train);
+            }
+            let obs: Vec<Vec<Obs>> = band_classes
+                .iter()
+                .map(|c| train.observations(c.clone()))
+                .collect();
+            fit_survival(&obs, opts)
+        })
+        .collect();
+    for (f, fit) in fits.iter().enumerate() {
         // The training folds' mean clear survival per band: the edge
         // model's dropout ε already holds it on average, so each held-out
         // observation's prediction is scaled by its own clear survival
