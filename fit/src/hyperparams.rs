@@ -53,10 +53,6 @@ fn yes() -> bool {
     true
 }
 
-fn is_yes(b: &bool) -> bool {
-    *b
-}
-
 /// Hyperparameters of a fit, before checking.
 ///
 /// | Name | Default | Purpose | Range |
@@ -117,9 +113,11 @@ pub struct FitValidParams {
     pub(crate) require_edge: bool,
     #[serde(default)]
     pub(crate) apply_bend: bool,
-    // Left out of the JSON when on (the default), so the parameters of
-    // every state and table written before it existed hash the same.
-    #[serde(default = "yes", skip_serializing_if = "is_yes")]
+    // Left out of `to_json` when on (the default), so the parameters of
+    // every table written before it existed read and hash the same. (Not
+    // `skip_serializing_if`: a state file's body is a positional binary
+    // encoding, which cannot skip a field.)
+    #[serde(default = "yes")]
     pub(crate) compare_laws: bool,
     pub(crate) edge_test_alpha: f64,
     pub(crate) survival_log_step: f64,
@@ -518,9 +516,16 @@ impl FitValidParams {
     pub fn radar_min_presence(&self) -> f64 {
         self.radar_min_presence
     }
-    /// Every parameter as JSON (for provenance).
+    /// Every parameter as JSON (for provenance), `compare_laws` only when off
+    /// (so tables written before it existed read and hash the same).
     pub fn to_json(&self) -> serde_json::Value {
-        serde_json::to_value(self).unwrap_or(serde_json::Value::Null)
+        let mut v = serde_json::to_value(self).unwrap_or(serde_json::Value::Null);
+        if self.compare_laws
+            && let Some(o) = v.as_object_mut()
+        {
+            o.remove("compare_laws");
+        }
+        v
     }
 }
 

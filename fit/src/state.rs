@@ -86,7 +86,8 @@ use crate::survival::Partition;
 use crate::{FitError, FitParams, FitValidParams, FittedTable, TOOL};
 
 /// Version of the state file layout; a state of another format is refused.
-pub const STATE_FORMAT: u32 = 1;
+/// Format 2: the parameters gained `compare_laws`.
+pub const STATE_FORMAT: u32 = 2;
 
 const MAGIC: &[u8; 8] = b"MURKFITS";
 

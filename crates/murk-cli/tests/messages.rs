@@ -236,3 +236,42 @@ fn convert_prints_one_line_for_the_whole_batch() {
         "{text}"
     );
 }
+
+/// `--no-law-comparison`: the table says the laws were not compared (and
+/// the parameter is in its provenance); with `--bend` it is refused by
+/// name.
+#[test]
+fn no_law_comparison_is_said_in_the_table_and_refused_with_bend() {
+    let dir = tempfile::tempdir().unwrap();
+    let campaign = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/default-campaign");
+    let out = dir.path().join("t.json");
+    let o = murk(&[
+        "fit",
+        s(&campaign),
+        "--out",
+        s(&out),
+        "--bootstrap",
+        "0",
+        "--no-law-comparison",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let t: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert_eq!(t["provenance"]["parameters"]["compare_laws"], false);
+    let fog = &t["weathers"]["fog"]["law_choice"];
+    assert_eq!(fog["chosen"], "linear", "{fog}");
+    assert!(
+        fog["reason"].as_str().unwrap().contains("not compared"),
+        "{fog}"
+    );
+    let o = murk(&[
+        "fit",
+        s(&campaign),
+        "--out",
+        s(&out),
+        "--bend",
+        "--no-law-comparison",
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--no-law-comparison"), "{}", stderr(&o));
+}

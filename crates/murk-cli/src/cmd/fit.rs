@@ -114,6 +114,12 @@ pub struct Args {
     /// (see `murk diagnose`).
     #[arg(long)]
     pub bend: bool,
+    /// Skip the held-out comparison of the bending law with the line
+    /// (`law_choice` then says the laws were not compared): the bend's
+    /// exponent is profiled in every band and in each fold, most of a fit's
+    /// time. Not with `--bend`, which needs it.
+    #[arg(long, conflicts_with = "bend")]
+    pub no_law_comparison: bool,
     /// Bootstrap replicates for rate uncertainties.
     #[arg(long, default_value_t = 1000)]
     pub bootstrap: u32,
@@ -156,6 +162,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .free_dropout(!args.fixed_dropout)
         .require_edge(!args.keep_unconfirmed_slopes)
         .apply_bend(args.bend)
+        .compare_laws(!args.no_law_comparison)
         .bootstrap_replicates(args.bootstrap)
         .seed(args.seed)
         .radar_tolerance_m(args.radar_tolerance)
