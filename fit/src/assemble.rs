@@ -13,7 +13,9 @@ use crate::accumulate::{NoiseAcc, OCCLUDER_STEP_M, WeatherAcc};
 use crate::accumulate::{ROW_OCCLUDER_STEP_M, RecordingRow};
 use crate::diagnostics::{NoiseHistograms, RangeMorDensity, WeatherDiagnostics};
 use crate::hyperparams::Band;
-use crate::quantile_slope::{BandCells, BinQuantile, MorBinStats, bin_quantile, quantile_slope};
+use crate::quantile_slope::{
+    BandCells, BinQuantile, MorBinStats, bin_quantile, quantile_slope, quantile_slope_interval,
+};
 use crate::reference::ClearReference;
 use crate::stats::bootstrap::{RateUncertainty, bootstrap_rate};
 use crate::stats::counts::{CountFit, CountLawFailure, Family, fit_count_law};
@@ -862,15 +864,21 @@ pub fn weather(
             let cells = BandCells::new(cx.reference, b);
             let qs = band_quantiles(acc, &means, &cells, p, ml_slope(i), rs);
             let slope = quantile_slope(&qs, rs);
+            let interval = quantile_slope_interval(&qs, rs).ok();
             SlopeBand {
                 reflectivity_min: b.min,
                 reflectivity_max: b.max,
                 slope: slope.as_ref().ok().copied(),
                 points: qs.iter().filter(|q| q.used).map(|q| q.points).sum(),
                 reason: slope.err(),
-                std_error: None,
+                std_error: interval.map(|(se, _)| se),
                 std_error_independent: None,
-                ci95: None,
+                ci95: interval.map(|(_, [low, high])| Interval {
+                    low,
+                    high,
+                    level: 0.95,
+                    method: "grouped jackknife over the used MOR bins of recordings (Student t on bins − 1 df)".into(),
+                }),
                 edge_test: None,
                 edge_width: None,
                 edge_width_ci95: None,

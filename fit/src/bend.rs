@@ -291,10 +291,7 @@ pub fn jackknife_interval(estimate: f64, leave_out: &[Option<f64>]) -> Result<[f
             "an exponent sits at the end of the searched range [{lo}, {hi}]"
         ));
     }
-    let kf = k as f64;
-    let mean = th.iter().sum::<f64>() / kf;
-    let var = (kf - 1.0) / kf * th.iter().map(|c| (c - mean).powi(2)).sum::<f64>();
-    let half = crate::survival::student_t_975(kf - 1.0) * var.sqrt();
+    let (_, half) = crate::stats::jackknife(&th).ok_or("a fold's exponent is not finite")?;
     Ok([estimate - half, estimate + half])
 }
 

@@ -220,6 +220,47 @@ pub fn quantile_slope(bins: &[BinQuantile], range_scale: f64) -> Result<f64, Str
     zero_intercept_slope(&x, &y).ok_or_else(|| "the regression has no solution".to_string())
 }
 
+/// The 95 % interval of [`quantile_slope`] over the recordings, grouped by
+/// MOR bin: the slope again with each used bin (its recordings) left out,
+/// a delete-a-group jackknife with Student's t on `k − 1` degrees of
+/// freedom (`stats::jackknife`). A bin's quantile carries its recordings'
+/// shared MOR reading and sensor state, so the bins, not the returns, are
+/// the independent units; which bins are used (censoring) is kept as
+/// fitted. Returns `(standard error, [low, high])`, or why there is none
+/// (fewer than three used bins).
+pub fn quantile_slope_interval(
+    bins: &[BinQuantile],
+    range_scale: f64,
+) -> Result<(f64, [f64; 2]), String> {
+    let slope = quantile_slope(bins, range_scale)?;
+    let pts: Vec<(f64, f64)> = bins
+        .iter()
+        .filter(|b| b.used)
+        .filter_map(|b| b.quantile.map(|q| (b.mor_mean * range_scale, q)))
+        .collect();
+    let k = pts.len();
+    if k < 3 {
+        return Err(format!(
+            "{k} used MOR bins are too few for an interval over them (the jackknife needs 3)"
+        ));
+    }
+    let leave_out: Option<Vec<f64>> = (0..k)
+        .map(|i| {
+            let (x, y): (Vec<f64>, Vec<f64>) = pts
+                .iter()
+                .enumerate()
+                .filter(|(j, _)| *j != i)
+                .map(|(_, p)| *p)
+                .unzip();
+            zero_intercept_slope(&x, &y)
+        })
+        .collect();
+    let leave_out = leave_out.ok_or("the slope has no solution with a MOR bin left out")?;
+    let (se, half) = crate::stats::jackknife(&leave_out)
+        .ok_or("the slope is not finite with a MOR bin left out")?;
+    Ok((se, [slope - half, slope + half]))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
