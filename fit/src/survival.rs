@@ -311,7 +311,16 @@ fn band_nll(obs: &[Obs], edge: EdgeShape, s: f64, w: f64, eps: f64, pi: f64) -> 
         let (sf, cdf) = tails(edge, (o.u - s) * scale);
         let p = (pi + a * sf).max(1e-300);
         let q = (eps + a * cdf).max(1e-300);
-        nll -= o.kept * p.ln() + (o.total - o.kept) * q.ln();
+        // A bin that kept all or none of its trials needs one logarithm:
+        // the other term is zero times a finite logarithm (p, q ≥ 1e-300),
+        // so the sum is the same bits either way.
+        nll -= if o.kept == o.total {
+            o.kept * p.ln()
+        } else if o.kept == 0.0 {
+            o.total * q.ln()
+        } else {
+            o.kept * p.ln() + (o.total - o.kept) * q.ln()
+        };
     }
     nll
 }
