@@ -528,8 +528,8 @@ fn bend_and_check(
             Err("the laws were not compared (compare_laws is off): the line is kept".to_string()),
         )
     };
-    let all_fitted =
-        p.compare_laws() && powers.iter().zip(&fitted).all(|(p, f)| !*f || p.is_some());
+    // False when the laws were not compared (no power law was fitted).
+    let all_fitted = powers.iter().zip(&fitted).all(|(p, f)| !*f || p.is_some());
     let wins = all_fitted && matches!(&evidence, Ok(e) if e.gain > 0.0 && e.p <= alpha);
     let bent = wins && p.apply_bend();
     let choice = LawChoice {

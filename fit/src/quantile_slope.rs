@@ -196,14 +196,17 @@ pub fn bin_quantile(
     out
 }
 
+/// The regression's points: `(MOR × range_scale, quantile)` of the used bins.
+fn used_points(bins: &[BinQuantile], range_scale: f64) -> impl Iterator<Item = (f64, f64)> + '_ {
+    bins.iter()
+        .filter(|b| b.used)
+        .filter_map(move |b| b.quantile.map(|q| (b.mor_mean * range_scale, q)))
+}
+
 /// The seed's slope from the bins' quantiles: zero-intercept least squares of
 /// the used bins' quantile on `MOR × range_scale`.
 pub fn quantile_slope(bins: &[BinQuantile], range_scale: f64) -> Result<f64, String> {
-    let (x, y): (Vec<f64>, Vec<f64>) = bins
-        .iter()
-        .filter(|b| b.used)
-        .filter_map(|b| b.quantile.map(|q| (b.mor_mean * range_scale, q)))
-        .unzip();
+    let (x, y): (Vec<f64>, Vec<f64>) = used_points(bins, range_scale).unzip();
     if x.is_empty() {
         let censored = bins.iter().filter(|b| b.censored).count();
         return Err(if bins.is_empty() {
@@ -233,11 +236,7 @@ pub fn quantile_slope_interval(
     range_scale: f64,
 ) -> Result<(f64, [f64; 2]), String> {
     let slope = quantile_slope(bins, range_scale)?;
-    let pts: Vec<(f64, f64)> = bins
-        .iter()
-        .filter(|b| b.used)
-        .filter_map(|b| b.quantile.map(|q| (b.mor_mean * range_scale, q)))
-        .collect();
+    let pts: Vec<(f64, f64)> = used_points(bins, range_scale).collect();
     let k = pts.len();
     if k < 3 {
         return Err(format!(

@@ -705,15 +705,21 @@ impl DiagnoseValidParams {
     /// the table's `edge_test`): a diagnosis measures what the law gets
     /// wrong, which it cannot do with no slope to simulate.
     fn fit_params(&self) -> Result<FitValidParams, DiagnoseError> {
+        Self::checked(self.fit_params_unchecked())
+    }
+
+    fn fit_params_unchecked(&self) -> FitParams {
         FitParams::default()
             .require_edge(false)
             .bootstrap_replicates(0)
             .seed(self.0.seed)
-            .check()
-            .map_err(|e| DiagnoseError::Fit {
-                what: "parameters".into(),
-                source: Box::new(e),
-            })
+    }
+
+    fn checked(p: FitParams) -> Result<FitValidParams, DiagnoseError> {
+        p.check().map_err(|e| DiagnoseError::Fit {
+            what: "parameters".into(),
+            source: Box::new(e),
+        })
     }
 
     /// The parameters of the per-fold baselines: [`Self::fit_params`]
@@ -725,16 +731,7 @@ impl DiagnoseValidParams {
     /// time. The table fitted on every recording, which the diagnosis
     /// publishes, keeps it.
     fn fold_fit_params(&self) -> Result<FitValidParams, DiagnoseError> {
-        FitParams::default()
-            .require_edge(false)
-            .bootstrap_replicates(0)
-            .compare_laws(false)
-            .seed(self.0.seed)
-            .check()
-            .map_err(|e| DiagnoseError::Fit {
-                what: "parameters".into(),
-                source: Box::new(e),
-            })
+        Self::checked(self.fit_params_unchecked().compare_laws(false))
     }
 
     /// Runs the diagnosis on `campaign`: folds, the baseline per fold on
