@@ -119,6 +119,11 @@ fn merge_cells(mut v: Vec<(u32, u32, u32, f64)>) -> (Vec<(u32, u32, u32)>, Vec<f
             }
         }
     }
+    // Sized for every cell, filled with one entry per survival bin: a row is
+    // kept per recording, so the cells' capacity would grow a fit's memory
+    // by about a megabyte per recording of HDL-64 size.
+    out.shrink_to_fit();
+    clear.shrink_to_fit();
     (out, clear)
 }
 

@@ -188,6 +188,13 @@ pub struct CellImage {
     pub frames: u32,
 }
 
+/// Lets [`ClearReference::build`] take images or references to them.
+impl AsRef<CellImage> for CellImage {
+    fn as_ref(&self) -> &CellImage {
+        self
+    }
+}
+
 fn median_f32(v: &mut [f32]) -> f32 {
     v.sort_by(f32::total_cmp);
     let n = v.len();
@@ -225,9 +232,15 @@ impl CellImage {
             f[*k as usize] = p.reflectivity;
             *k += 1;
         }
+        // Sized to the occupied cells: images are held for every clear
+        // recording while the reference is built.
+        let occupied = start.windows(2).filter(|w| w[0] != w[1]).count();
         let mut img = CellImage {
+            cells: Vec::with_capacity(occupied),
+            range: Vec::with_capacity(occupied),
+            reflectivity: Vec::with_capacity(occupied),
+            hits: Vec::with_capacity(occupied),
             frames: frames.max(1),
-            ..CellImage::default()
         };
         for c in 0..n_cells {
             let (a, b) = (start[c] as usize, start[c + 1] as usize);
@@ -280,14 +293,19 @@ impl ClearReference {
     /// `h × scans` expected over all clear recordings.
     ///
     /// `images` must be non-empty (the caller reports "no clear reference").
-    pub fn build(grid: CellGrid, images: &[CellImage], params: &FitValidParams) -> ClearReference {
+    pub fn build<I: AsRef<CellImage>>(
+        grid: CellGrid,
+        images: &[I],
+        params: &FitValidParams,
+    ) -> ClearReference {
+        let images: Vec<&CellImage> = images.iter().map(AsRef::as_ref).collect();
         let n_cells = grid.cells();
         let n = images.len();
         let frames: Vec<u64> = images.iter().map(|i| i.frames.max(1) as u64).collect();
         let all_frames: u64 = frames.iter().sum();
         // Transpose: per cell, the entries of every recording that hit it.
         let mut start = vec![0usize; n_cells + 1];
-        for img in images {
+        for img in &images {
             for &c in &img.cells {
                 start[c as usize + 1] += 1;
             }
@@ -396,7 +414,7 @@ impl ClearReference {
         if n >= 2 {
             leave_one_out(
                 &mut reference,
-                images,
+                &images,
                 &entry_of,
                 &e_h,
                 &loo_cells,
@@ -532,7 +550,7 @@ fn presence_holds(min_presence: f64, h: u32, frames: f64, hits: f64) -> bool {
 /// Fills `loo` (per recording) and `cell_loo` (per reference cell).
 fn leave_one_out(
     reference: &mut ClearReference,
-    images: &[CellImage],
+    images: &[&CellImage],
     entry_of: &[u32],
     e_h: &[u32],
     cells: &LooCells,

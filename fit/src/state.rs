@@ -703,11 +703,13 @@ impl FitState {
             });
         };
         let grid = grid_of(geometry, inputs, params);
-        let images: Vec<CellImage> = self
+        // Borrowed, not cloned: a campaign's clear images are its largest
+        // summaries, and the reference is built while the state holds them.
+        let images: Vec<&CellImage> = self
             .body
             .clear
             .values()
-            .filter_map(|e| e.image.clone())
+            .filter_map(|e| e.image.as_ref())
             .collect();
         let n_clear = self.body.clear.len();
         if images.is_empty() {
