@@ -445,7 +445,7 @@ impl<'a> SurvivalData<'a> {
             appliers.push(applier(table, loaded, rec, false, 0)?);
             mors.push(rec.mor);
             let a = (appliers.len() - 1) as u32;
-            for u in &rec.units {
+            for u in rec.units.iter() {
                 let c = cell(u.cell);
                 let bin = match binning {
                     Some(b) => match bin_of(b, covariate, &c.cov, &rec.scan) {

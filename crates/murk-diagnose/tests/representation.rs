@@ -4,7 +4,7 @@
 //! they come from, on two generated campaigns.
 
 use murk_campaign::Campaign;
-use murk_diagnose::data::{ClearRec, Kept, Unit, load};
+use murk_diagnose::data::{ClearRec, Kept, load};
 use murk_diagnose::evaluate::RecEval;
 use murk_fit::FitParams;
 use murk_fixtures::{Generator, GeneratorConfig, OutputOptions, PerClass, Preset};
@@ -63,11 +63,17 @@ fn a_recording_is_held_as_per_cell_summaries_and_a_clear_one_as_its_path() {
             assert!(kept <= trials, "{}", r.id);
             assert_eq!(r.kept.len() as u64, kept, "{}", r.id);
             // So a recording's summaries are bounded by its reference cells
-            // (times its scans), whatever its points: 24 bytes per cell of
-            // a single-scan file.
-            let bytes = r.units.len() * std::mem::size_of::<Unit>()
-                + r.kept.len() * std::mem::size_of::<Kept>();
-            assert!(bytes <= 24 * present, "{}: {bytes} bytes", r.id);
+            // (times its scans), whatever its points: a bit and a byte per
+            // reference cell for its units (a single-scan file's counts fit
+            // in a byte), 12 bytes per kept return.
+            assert!(
+                r.units.heap_bytes() <= present.div_ceil(64) * 8 + present,
+                "{}: {} bytes of units for {present} cells",
+                r.id,
+                r.units.heap_bytes()
+            );
+            let bytes = r.units.heap_bytes() + r.kept.len() * std::mem::size_of::<Kept>();
+            assert!(bytes <= 14 * present, "{}: {bytes} bytes", r.id);
         }
     }
 }
