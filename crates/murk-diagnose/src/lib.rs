@@ -881,23 +881,22 @@ impl DiagnoseValidParams {
         let mut held = Vec::with_capacity(folds.k);
         let mut evals: Vec<RecEval> = Vec::with_capacity(n);
         let fold_params = self.fold_fit_params()?;
-        // The folds' fits in parallel (each sees its own recordings only);
-        // the first failure in fold order is the one reported, so the
-        // error, like the result, does not depend on the thread count.
-        let fitted: Vec<Result<CoefficientTable, DiagnoseError>> = (0..folds.k)
-            .into_par_iter()
-            .map(|f| match &p.coefficients {
-                Some(t) => Ok(t.clone()),
+        // The folds' fits one after the other, each parallel inside (reading,
+        // pairing, the law comparison's folds). A fit holds every clear
+        // recording's image while it builds its reference, so fits side by
+        // side multiply the campaign's largest summaries: at 240 HDL-64-like
+        // recordings, two at once peaked at 544 MB and one at a time at
+        // 385 MB, for 25 % more time (`examples/diagnose_bench`).
+        for f in 0..folds.k {
+            let table = match &p.coefficients {
+                Some(t) => t.clone(),
                 None => self.fit_on(
                     loaded,
                     &folds.fit_set(f),
                     &fold_params,
                     &format!("fold {}", f + 1),
-                ),
-            })
-            .collect();
-        for (f, table) in fitted.into_iter().enumerate() {
-            let table = table?;
+                )?,
+            };
             let out = folds.held_out(f);
             evals.extend(evaluate(loaded, &table, &out, Some(sim), fit_params)?);
             tables.push(table);
