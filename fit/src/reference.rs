@@ -195,6 +195,20 @@ impl AsRef<CellImage> for CellImage {
     }
 }
 
+/// `img` with its cells in ascending order (duplicates kept, in their
+/// order).
+fn sorted_image(img: &CellImage) -> CellImage {
+    let mut idx: Vec<usize> = (0..img.cells.len()).collect();
+    idx.sort_by_key(|&j| img.cells[j]);
+    CellImage {
+        cells: idx.iter().map(|&j| img.cells[j]).collect(),
+        range: idx.iter().map(|&j| img.range[j]).collect(),
+        reflectivity: idx.iter().map(|&j| img.reflectivity[j]).collect(),
+        hits: idx.iter().map(|&j| img.hits[j]).collect(),
+        frames: img.frames,
+    }
+}
+
 fn median_f32(v: &mut [f32]) -> f32 {
     v.sort_by(f32::total_cmp);
     let n = v.len();
@@ -299,41 +313,29 @@ impl ClearReference {
         params: &FitValidParams,
     ) -> ClearReference {
         let images: Vec<&CellImage> = images.iter().map(AsRef::as_ref).collect();
+        // The blocks below walk each image's cells in ascending order (as
+        // `CellImage` promises); an image from elsewhere (a state file) that
+        // is not is sorted first.
+        let sorted: Vec<Option<CellImage>> = images
+            .iter()
+            .map(|img| (!img.cells.is_sorted_by(|a, b| a < b)).then(|| sorted_image(img)))
+            .collect();
+        let images: Vec<&CellImage> = images
+            .iter()
+            .zip(&sorted)
+            .map(|(&img, s)| s.as_ref().unwrap_or(img))
+            .collect();
         let n_cells = grid.cells();
         let n = images.len();
         let frames: Vec<u64> = images.iter().map(|i| i.frames.max(1) as u64).collect();
         let all_frames: u64 = frames.iter().sum();
-        // Transpose: per cell, the entries of every recording that hit it.
-        let mut start = vec![0usize; n_cells + 1];
+        // Entry `first[i] + j` is image i's j-th cell (image order).
+        let mut first = Vec::with_capacity(n + 1);
+        first.push(0usize);
         for img in &images {
-            for &c in &img.cells {
-                start[c as usize + 1] += 1;
-            }
+            first.push(first[first.len() - 1] + img.cells.len());
         }
-        for i in 0..n_cells {
-            start[i + 1] += start[i];
-        }
-        let total = start[n_cells];
-        let mut fill = start.clone();
-        let mut e_rec = vec![0u32; total];
-        let mut e_r = vec![0f32; total];
-        let mut e_f = vec![0f32; total];
-        let mut e_h = vec![0u32; total];
-        // The entry of each image cell, in image order (recording by
-        // recording), for the leave-one-out pass.
-        let mut entry_of = Vec::with_capacity(total);
-        for (ri, img) in images.iter().enumerate() {
-            for j in 0..img.cells.len() {
-                let c = img.cells[j] as usize;
-                let k = fill[c];
-                e_rec[k] = ri as u32;
-                e_r[k] = img.range[j];
-                e_f[k] = img.reflectivity[j];
-                e_h[k] = img.hits[j];
-                entry_of.push(k as u32);
-                fill[c] += 1;
-            }
-        }
+        let total = first[n];
 
         let mut reference = ClearReference {
             grid,
@@ -365,49 +367,100 @@ impl ClearReference {
         let mut fs: Vec<f32> = Vec::new();
         let mut hs: Vec<u32> = Vec::new();
         let mut dev: Vec<f32> = Vec::new();
-        for c in 0..n_cells {
-            let (a, b) = (start[c], start[c + 1]);
-            let m = b - a;
-            if m == 0 {
-                continue;
+        // Per cell, the entries of every recording that hit it, in
+        // recording order, gathered a block of cells at a time: the images
+        // are the campaign's largest summaries (16 bytes per clear
+        // recording and occupied cell), and a transposed copy of all of
+        // them would more than double what building holds.
+        const BLOCK: usize = 4096;
+        let mut cursor = vec![0usize; n];
+        let mut start = vec![0usize; BLOCK + 1];
+        let mut fill = vec![0usize; BLOCK];
+        // (recording, position in its image) per entry of the block.
+        let mut ent: Vec<(u32, u32)> = Vec::new();
+        let (mut e_rec, mut e_r, mut e_f, mut e_h, mut e_k) =
+            (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        for c0 in (0..n_cells).step_by(BLOCK) {
+            let c1 = (c0 + BLOCK).min(n_cells);
+            start.iter_mut().for_each(|x| *x = 0);
+            for (i, img) in images.iter().enumerate() {
+                for &c in img.cells[cursor[i]..].iter().take_while(|&&c| (c as usize) < c1) {
+                    start[c as usize - c0 + 1] += 1;
+                }
             }
-            rs.clear();
-            rs.extend_from_slice(&e_r[a..b]);
-            order.clear();
-            order.extend(0..m);
-            order.sort_by(|&i, &j| e_r[a + i].total_cmp(&e_r[a + j]).then(i.cmp(&j)));
-            rs.sort_by(f32::total_cmp);
-            reference.env_lo[c] = rs[0];
-            reference.env_hi[c] = rs[m - 1];
-            let med = median_f32(&mut rs.clone());
-            dev.clear();
-            dev.extend(rs.iter().map(|r| (r - med).abs()));
-            let mad = median_f32(&mut dev);
-            let tol = params.pairing_tolerance(med as f64) as f32;
-            let stable = mad <= tol;
-            hs.clear();
-            hs.extend((a..b).map(|k| {
-                let f = frames[e_rec[k] as usize];
-                ((e_h[k] as u64 + f / 2) / f).max(1) as u32
-            }));
-            hs.sort_unstable();
-            let h = hs[(m - 1) / 2].max(1);
-            let hit_sum: u64 = e_h[a..b].iter().map(|&x| x as u64).sum();
-            if stable && presence_holds(min_presence, h, all_frames as f64, hit_sum as f64) {
-                fs.clear();
-                fs.extend_from_slice(&e_f[a..b]);
-                reference.range[c] = med;
-                reference.reflectivity[c] = median_f32(&mut fs);
-                reference.hits[c] = h.min(u16::MAX as u32) as u16;
-                reference.present.push(c as u32);
+            for k in 0..c1 - c0 {
+                start[k + 1] += start[k];
             }
-            loo_cells.stable[c] = stable;
-            loo_cells.median[c] = med;
-            loo_cells.h[c] = h;
-            loo_cells.hit_sum[c] = hit_sum;
-            if m >= 2 {
-                for (pos, &i) in order.iter().enumerate() {
-                    loo_cells.median_without[a + i] = median_without(&rs, pos);
+            fill[..c1 - c0].copy_from_slice(&start[..c1 - c0]);
+            ent.clear();
+            ent.resize(start[c1 - c0], (0, 0));
+            for (i, img) in images.iter().enumerate() {
+                let mut q = cursor[i];
+                while q < img.cells.len() && (img.cells[q] as usize) < c1 {
+                    let k = &mut fill[img.cells[q] as usize - c0];
+                    ent[*k] = (i as u32, q as u32);
+                    *k += 1;
+                    q += 1;
+                }
+                cursor[i] = q;
+            }
+            for c in c0..c1 {
+                let (a, b) = (start[c - c0], start[c - c0 + 1]);
+                let m = b - a;
+                if m == 0 {
+                    continue;
+                }
+                e_rec.clear();
+                e_r.clear();
+                e_f.clear();
+                e_h.clear();
+                e_k.clear();
+                for &(i, q) in &ent[a..b] {
+                    let (img, q) = (images[i as usize], q as usize);
+                    e_rec.push(i);
+                    e_r.push(img.range[q]);
+                    e_f.push(img.reflectivity[q]);
+                    e_h.push(img.hits[q]);
+                    e_k.push(first[i as usize] + q);
+                }
+                rs.clear();
+                rs.extend_from_slice(&e_r);
+                order.clear();
+                order.extend(0..m);
+                order.sort_by(|&i, &j| e_r[i].total_cmp(&e_r[j]).then(i.cmp(&j)));
+                rs.sort_by(f32::total_cmp);
+                reference.env_lo[c] = rs[0];
+                reference.env_hi[c] = rs[m - 1];
+                let med = median_f32(&mut rs.clone());
+                dev.clear();
+                dev.extend(rs.iter().map(|r| (r - med).abs()));
+                let mad = median_f32(&mut dev);
+                let tol = params.pairing_tolerance(med as f64) as f32;
+                let stable = mad <= tol;
+                hs.clear();
+                hs.extend((0..m).map(|k| {
+                    let f = frames[e_rec[k] as usize];
+                    ((e_h[k] as u64 + f / 2) / f).max(1) as u32
+                }));
+                hs.sort_unstable();
+                let h = hs[(m - 1) / 2].max(1);
+                let hit_sum: u64 = e_h.iter().map(|&x| x as u64).sum();
+                if stable && presence_holds(min_presence, h, all_frames as f64, hit_sum as f64) {
+                    fs.clear();
+                    fs.extend_from_slice(&e_f);
+                    reference.range[c] = med;
+                    reference.reflectivity[c] = median_f32(&mut fs);
+                    reference.hits[c] = h.min(u16::MAX as u32) as u16;
+                    reference.present.push(c as u32);
+                }
+                loo_cells.stable[c] = stable;
+                loo_cells.median[c] = med;
+                loo_cells.h[c] = h;
+                loo_cells.hit_sum[c] = hit_sum;
+                if m >= 2 {
+                    for (pos, &i) in order.iter().enumerate() {
+                        loo_cells.median_without[e_k[i]] = median_without(&rs, pos);
+                    }
                 }
             }
         }
@@ -415,8 +468,6 @@ impl ClearReference {
             leave_one_out(
                 &mut reference,
                 &images,
-                &entry_of,
-                &e_h,
                 &loo_cells,
                 all_frames,
                 params,
@@ -551,8 +602,6 @@ fn presence_holds(min_presence: f64, h: u32, frames: f64, hits: f64) -> bool {
 fn leave_one_out(
     reference: &mut ClearReference,
     images: &[&CellImage],
-    entry_of: &[u32],
-    e_h: &[u32],
     cells: &LooCells,
     all_frames: u64,
     params: &FitValidParams,
@@ -567,13 +616,12 @@ fn leave_one_out(
     let mut first = 0usize;
     for (i, img) in images.iter().enumerate() {
         let f = reference.frames[i];
-        let entries = &entry_of[first..first + img.cells.len()];
-        first += img.cells.len();
         for (j, &c) in img.cells.iter().enumerate() {
             rec_range[c as usize] = img.range[j];
             rec_hits[c as usize] = img.hits[j];
-            rec_entry[c as usize] = entries[j];
+            rec_entry[c as usize] = (first + j) as u32;
         }
+        first += img.cells.len();
         let frames_without = (all_frames - f) as f64;
         for ring in &rings {
             matcher.clear();
@@ -584,7 +632,7 @@ fn leave_one_out(
                 } else if rec_entry[c] != u32::MAX {
                     let k = rec_entry[c] as usize;
                     let med = cells.median_without[k];
-                    let hits_without = (cells.hit_sum[c] - e_h[k] as u64) as f64;
+                    let hits_without = (cells.hit_sum[c] - rec_hits[c] as u64) as f64;
                     let ok = med.is_finite()
                         && presence_holds(min_presence, cells.h[c], frames_without, hits_without);
                     (med, ok)
@@ -913,6 +961,62 @@ mod tests {
         // The unstable cell keeps its envelope: 4.5–40.5 m with 0.5 m tolerance.
         assert!(r.in_envelope(2, 30.0, 0.5) && !r.in_envelope(2, 41.0, 0.5));
         assert!(r.in_envelope(1, 7.2, 0.5));
+    }
+
+    #[test]
+    fn a_reference_of_many_blocks_and_unsorted_images_is_the_per_cell_median() {
+        // 16 rings at 0.1°: 57,600 cells, fourteen blocks of the gathering.
+        let mut spec = LidarSpec::vlp16();
+        spec.azimuth_resolution_deg = 0.1;
+        let g = CellGrid::new(&spec);
+        assert!(g.cells() > 10 * 4096, "{}", g.cells());
+        let p = FitParams::default().check().unwrap();
+        // Five recordings; each misses every fifth cell at its own phase,
+        // and its ranges differ by a millimetre per recording.
+        let ranges = |i: usize, c: usize| 10.0 + (c % 97) as f32 * 0.5 + i as f32 * 1e-3;
+        let imgs: Vec<CellImage> = (0..5)
+            .map(|i| {
+                let cells: Vec<(u32, f32, f32)> = (0..g.cells())
+                    .filter(|c| (c * 7 + i) % 5 != 0)
+                    .map(|c| (c as u32, ranges(i, c), (c % 50) as f32))
+                    .collect();
+                img(&cells)
+            })
+            .collect();
+        let r = ClearReference::build(g.clone(), &imgs, &p);
+        let mut checked = 0;
+        for c in 0..g.cells() {
+            let mut rs: Vec<f32> = (0..5)
+                .filter(|i| (c * 7 + i) % 5 != 0)
+                .map(|i| ranges(i, c))
+                .collect();
+            // Four of five recordings hit every cell: all are present.
+            assert_eq!(rs.len(), 4);
+            assert_eq!(r.range(c), median_f32(&mut rs), "cell {c}");
+            assert_eq!(r.reflectivity(c), (c % 50) as f32, "cell {c}");
+            checked += 1;
+        }
+        assert_eq!(r.present().len(), checked);
+        // The same images with their cells in descending order: the same
+        // reference, leave-one-out included.
+        let reversed: Vec<CellImage> = imgs
+            .iter()
+            .map(|m| CellImage {
+                cells: m.cells.iter().rev().copied().collect(),
+                range: m.range.iter().rev().copied().collect(),
+                reflectivity: m.reflectivity.iter().rev().copied().collect(),
+                hits: m.hits.iter().rev().copied().collect(),
+                frames: m.frames,
+            })
+            .collect();
+        let refs: Vec<&CellImage> = reversed.iter().collect();
+        assert_eq!(ClearReference::build(g, &refs, &p), r);
+        // Each recording is scored on every reference cell and keeps at
+        // least its own four fifths.
+        for &(k, t) in r.leave_one_out() {
+            assert_eq!(t as usize, checked);
+            assert!(k as usize >= 4 * checked / 5 - 1 && k <= t, "{k} of {t}");
+        }
     }
 
     #[test]
