@@ -14,9 +14,12 @@
 //! byte. Delete `DIR` afterwards: 1,000 recordings are about 2 GB.
 //!
 //! `cargo build --workspace --release --examples`, then
-//! `target/release/examples/diagnose_bench DIR N [--vlp16] [--keep]`
-//! (`--vlp16`: the small preset's VLP-16 instead; `--keep` keeps the
-//! campaign, which is otherwise removed after the run).
+//! `target/release/examples/diagnose_bench DIR N [--vlp16] [--azimuth DEG] [--keep]`
+//! (`--vlp16`: the small preset's VLP-16 instead; `--azimuth 0.09`: the
+//! HDL-64 fired every 0.09° instead of 0.2°, about 100 k points per scan
+//! as at 5 Hz, the campaign named `hdl64-0.09-N`; `--keep` keeps the
+//! campaign, which is otherwise removed after the run). The mean points
+//! per scan of the first recording is printed with the figures.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -36,12 +39,20 @@ fn status_mb(field: &str) -> Option<f64> {
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let usage = "usage: diagnose_bench DIR N [--vlp16] [--keep]";
+    let usage = "usage: diagnose_bench DIR N [--vlp16] [--azimuth DEG] [--keep]";
     let dir: PathBuf = args.first().map(PathBuf::from).ok_or(usage)?;
     let n: usize = args.get(1).ok_or(usage)?.parse()?;
     let vlp16 = args.iter().any(|a| a == "--vlp16");
     let keep = args.iter().any(|a| a == "--keep");
-    let name = format!("{}-{n}", if vlp16 { "vlp16" } else { "hdl64" });
+    let azimuth: Option<f64> = match args.iter().position(|a| a == "--azimuth") {
+        Some(i) => Some(args.get(i + 1).ok_or(usage)?.parse()?),
+        None => None,
+    };
+    let name = match (vlp16, azimuth) {
+        (true, _) => format!("vlp16-{n}"),
+        (false, None) => format!("hdl64-{n}"),
+        (false, Some(a)) => format!("hdl64-{a}-{n}"),
+    };
     let path = dir.join(&name);
     if !path.join("campaign.toml").is_file() {
         let t = Instant::now();
@@ -52,7 +63,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 .map(|k| 2.0 - k as f64 / 3.0)
                 .chain((0..32).map(|k| -8.83 - k as f64 * 0.5))
                 .collect();
-            c.lidar.azimuth_resolution_deg = 0.2;
+            c.lidar.azimuth_resolution_deg = azimuth.unwrap_or(0.2);
             c.sensor.azimuth_phase_deg = 0.13;
         }
         c.campaign.recordings = n;
@@ -71,6 +82,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     let before = status_mb("VmHWM").unwrap_or(f64::NAN);
     let campaign = Campaign::open(&path)?;
+    let points = match campaign.recordings().first() {
+        Some(r) => {
+            let (cloud, scans) =
+                murk_diagnose::data::read_revolutions(&r.lidar().path, campaign.lidar())?;
+            cloud.len() as f64 / scans as f64
+        }
+        None => f64::NAN,
+    };
     let t = Instant::now();
     let d = DiagnoseParams::new(WeatherClass::Fog)
         .check()?
@@ -82,7 +101,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         std::fs::write(dir.join(format!("{name}.extended.json")), t.to_json()?)?;
     }
     println!(
-        "{name}: {} recordings ({} fog held out), {} rayon threads",
+        "{name}: {} recordings ({} fog held out), {points:.0} points per scan, {} rayon threads",
         campaign.recordings().len(),
         d.report.heldout_recordings,
         rayon::current_num_threads()
