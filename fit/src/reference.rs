@@ -384,7 +384,10 @@ impl ClearReference {
             let c1 = (c0 + BLOCK).min(n_cells);
             start.iter_mut().for_each(|x| *x = 0);
             for (i, img) in images.iter().enumerate() {
-                for &c in img.cells[cursor[i]..].iter().take_while(|&&c| (c as usize) < c1) {
+                for &c in img.cells[cursor[i]..]
+                    .iter()
+                    .take_while(|&&c| (c as usize) < c1)
+                {
                     start[c as usize - c0 + 1] += 1;
                 }
             }
@@ -465,13 +468,7 @@ impl ClearReference {
             }
         }
         if n >= 2 {
-            leave_one_out(
-                &mut reference,
-                &images,
-                &loo_cells,
-                all_frames,
-                params,
-            );
+            leave_one_out(&mut reference, &images, &loo_cells, all_frames, params);
         }
         reference
     }

@@ -648,11 +648,26 @@ mod tests {
         // 130 cells (three bit words, the last partial), every third hidden,
         // kept counts spread to the width under test; a list built the
         // plain way is the truth.
-        for (frames, hits_max, scale) in [(1u32, 3u16, 1u32), (40, 9, 7), (600, 200, 997)] {
+        // The last cell keeps all its trials: the largest count, which sets
+        // the width (1, 2 and 4 bytes).
+        for (frames, hits_max, scale, width) in [
+            (1u32, 3u16, 1u32, 1usize),
+            (40, 9, 7, 2),
+            (600, 200, 997, 4),
+        ] {
             let cells: SharedCells = (0..130u32)
                 .map(|j| (7 * j + 2, 1 + (j % hits_max as u32) as u16))
                 .collect();
-            let unit = |j: usize| (j % 3 != 1).then(|| (j as u32 * scale) % (cells[j].1 as u32 * frames + 1));
+            let unit = |j: usize| {
+                let trials = cells[j].1 as u32 * frames;
+                (j % 3 != 1).then(|| {
+                    if j == 129 {
+                        trials
+                    } else {
+                        (j as u32 * scale) % (trials + 1)
+                    }
+                })
+            };
             let units = Units::new(cells.clone(), frames, unit);
             let truth: Vec<Unit> = (0..cells.len())
                 .filter_map(|j| {
@@ -666,9 +681,7 @@ mod tests {
             assert_eq!(units.iter().collect::<Vec<_>>(), truth, "frames {frames}");
             assert_eq!(units.len(), truth.len());
             assert!(!units.is_empty());
-            let max = truth.iter().map(|u| u.kept).max().unwrap();
-            let width = if max <= 255 { 1 } else if max <= 65_535 { 2 } else { 4 };
-            assert_eq!(units.heap_bytes(), 8 * 3 + width * 130, "frames {frames}, max {max}");
+            assert_eq!(units.heap_bytes(), 8 * 3 + width * 130, "frames {frames}");
         }
         let none = Units::new(SharedCells::from(vec![(0, 1)]), 1, |_| None);
         assert!(none.is_empty());
