@@ -468,7 +468,14 @@ impl ClearReference {
             }
         }
         if n >= 2 {
-            leave_one_out(&mut reference, &images, &loo_cells, all_frames, params);
+            leave_one_out(
+                &mut reference,
+                &images,
+                &first,
+                &loo_cells,
+                all_frames,
+                params,
+            );
         }
         reference
     }
@@ -595,10 +602,12 @@ fn presence_holds(min_presence: f64, h: u32, frames: f64, hits: f64) -> bool {
 /// edge. The ring is matched as a path from its first bin: at most one pair
 /// across the seam is missed.
 ///
-/// Fills `loo` (per recording) and `cell_loo` (per reference cell).
+/// Fills `loo` (per recording) and `cell_loo` (per reference cell). Entry
+/// `first[i] + j` of `cells.median_without` is image `i`'s `j`-th cell.
 fn leave_one_out(
     reference: &mut ClearReference,
     images: &[&CellImage],
+    first: &[usize],
     cells: &LooCells,
     all_frames: u64,
     params: &FitValidParams,
@@ -610,15 +619,13 @@ fn leave_one_out(
     let mut rec_entry = vec![u32::MAX; n_cells];
     let mut matcher = RingMatcher::new(params.azimuth_neighbours() as usize);
     let rings = reference.grid.rings.clone();
-    let mut first = 0usize;
     for (i, img) in images.iter().enumerate() {
         let f = reference.frames[i];
         for (j, &c) in img.cells.iter().enumerate() {
             rec_range[c as usize] = img.range[j];
             rec_hits[c as usize] = img.hits[j];
-            rec_entry[c as usize] = (first + j) as u32;
+            rec_entry[c as usize] = (first[i] + j) as u32;
         }
-        first += img.cells.len();
         let frames_without = (all_frames - f) as f64;
         for ring in &rings {
             matcher.clear();

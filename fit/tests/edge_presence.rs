@@ -24,6 +24,8 @@
 // the library's statistics, not out of its tests.
 #![allow(clippy::disallowed_methods, clippy::disallowed_types)]
 
+mod common;
+
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -283,18 +285,10 @@ fn real_frames_false_positive_rate_and_power() {
 /// removes returns, so no band may get a slope.
 #[test]
 fn generated_fog_that_does_nothing_gets_no_slope() {
-    use murk_fixtures::{Generator, GeneratorConfig, OutputOptions, PerClass, Preset};
+    use murk_fixtures::{Generator, OutputOptions};
     let (mut hits, mut n) = (0, 0);
     for seed in [31, 32, 33] {
-        let mut c = GeneratorConfig::preset(Preset::Small);
-        c.campaign.recordings = 40;
-        c.lidar.azimuth_resolution_deg = 2.0;
-        c.weather.mix = PerClass {
-            clear: 0.3,
-            fog: 0.7,
-            rain: 0.0,
-            snow: 0.0,
-        };
+        let mut c = common::fog_campaign();
         for b in &mut c.degradation.fog.bands {
             b.slope = 100.0;
         }

@@ -8,23 +8,17 @@
 //! version checks fewer seeds at a looser bound, and that the intervals are
 //! not the independent-returns ones (which cover almost never).
 
+mod common;
+
 use murk_campaign::Campaign;
 use murk_fit::FitParams;
-use murk_fixtures::{Generator, GeneratorConfig, OutputOptions, PerClass, Preset};
+use murk_fixtures::{Generator, GeneratorConfig, OutputOptions};
 use murk_types::WeatherClass;
 
 /// The campaign: 40 recordings, 70 % fog, MOR read with `mor_noise`; with
 /// `one_slope` both bands vanish at the low band's slope (no band mixing).
 fn config(mor_noise: f64, one_slope: bool) -> GeneratorConfig {
-    let mut c = GeneratorConfig::preset(Preset::Small);
-    c.campaign.recordings = 40;
-    c.lidar.azimuth_resolution_deg = 2.0;
-    c.weather.mix = PerClass {
-        clear: 0.3,
-        fog: 0.7,
-        rain: 0.0,
-        snow: 0.0,
-    };
+    let mut c = common::fog_campaign();
     c.weather.mor_noise_rel = mor_noise;
     if one_slope {
         let s = c.degradation.fog.bands[0].slope;

@@ -15,12 +15,14 @@
 
 #![allow(clippy::disallowed_methods, clippy::disallowed_types)]
 
+mod common;
+
 use std::path::Path;
 
 use murk_campaign::Campaign;
 use murk_fit::FitParams;
 use murk_fixtures::semi_real::{self, SemiRealConfig};
-use murk_fixtures::{Generator, GeneratorConfig, OutputOptions, PerClass, Preset};
+use murk_fixtures::{Generator, OutputOptions};
 use murk_types::WeatherClass;
 
 /// Per band: the q99 slope and its interval, `None` where either is null.
@@ -50,15 +52,7 @@ fn fit_q99(path: &Path, mor_bin_m: f64) -> Vec<Row> {
 }
 
 fn generated(seed: u64) -> Vec<Row> {
-    let mut c = GeneratorConfig::preset(Preset::Small);
-    c.campaign.recordings = 40;
-    c.lidar.azimuth_resolution_deg = 2.0;
-    c.weather.mix = PerClass {
-        clear: 0.3,
-        fog: 0.7,
-        rain: 0.0,
-        snow: 0.0,
-    };
+    let mut c = common::fog_campaign();
     c.weather.mor_noise_rel = 0.075;
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("campaign");

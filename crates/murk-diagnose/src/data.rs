@@ -73,7 +73,6 @@ pub struct Units {
     /// Bit `j` set: reference cell `j` is a unit.
     open: Vec<u64>,
     kept: KeptCounts,
-    len: usize,
 }
 
 /// Kept counts, one per reference cell (0 where it is not a unit).
@@ -110,12 +109,10 @@ impl Units {
         let n = cells.len();
         let mut open = vec![0u64; n.div_ceil(64)];
         let mut counts = vec![0u32; n];
-        let mut len = 0;
         for (j, k) in counts.iter_mut().enumerate() {
             if let Some(kept) = unit(j) {
                 open[j / 64] |= 1 << (j % 64);
                 *k = kept;
-                len += 1;
             }
         }
         let max = counts.iter().copied().max().unwrap_or(0);
@@ -131,7 +128,6 @@ impl Units {
             frames,
             open,
             kept,
-            len,
         }
     }
 
@@ -150,12 +146,12 @@ impl Units {
 
     /// Number of units.
     pub fn len(&self) -> usize {
-        self.len
+        self.open.iter().map(|w| w.count_ones() as usize).sum()
     }
 
     /// Whether there is no unit.
     pub fn is_empty(&self) -> bool {
-        self.len == 0
+        self.open.iter().all(|&w| w == 0)
     }
 
     /// Bytes the recording's units hold on the heap (the shared cells
