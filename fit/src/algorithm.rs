@@ -45,9 +45,10 @@ impl FitValidParams {
 }
 
 /// The one-shot fit is map over everything, then finish: one code path
-/// with the distributed fit ([`crate::FitState`]).
+/// with the distributed fit ([`crate::FitState`]), the clear images
+/// released once the reference is built ([`FitState::fit_all`]).
 fn fit_inputs(inputs: &FitInputs, params: &FitValidParams) -> Result<FittedTable, FitError> {
-    FitState::map_all(inputs, params)?.finish()
+    FitState::fit_all(inputs, params)
 }
 
 /// What a complete [`FitState`] hands to [`assemble_table`].
