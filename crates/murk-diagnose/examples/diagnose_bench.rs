@@ -14,11 +14,14 @@
 //! byte. Delete `DIR` afterwards: 1,000 recordings are about 2 GB.
 //!
 //! `cargo build --workspace --release --examples`, then
-//! `target/release/examples/diagnose_bench DIR N [--vlp16] [--azimuth DEG] [--keep]`
+//! `target/release/examples/diagnose_bench DIR N [--vlp16] [--azimuth DEG] [--hide] [--keep]`
 //! (`--vlp16`: the small preset's VLP-16 instead; `--azimuth 0.09`: the
 //! HDL-64 fired every 0.09° instead of 0.2°, about 100 k points per scan
-//! as at 5 Hz, the campaign named `hdl64-0.09-N`; `--keep` keeps the
-//! campaign, which is otherwise removed after the run). The mean points
+//! as at 5 Hz, the campaign named `hdl64-0.09-N`; `--hide`: the campaign
+//! hides a survival effect (fog survival × elevation, a factor 0.8 on the
+//! vanishing distance below −10°), so that the run fits a survival term,
+//! the name ending in `-hide`; `--keep` keeps the campaign, which is
+//! otherwise removed after the run). The mean points
 //! per scan of the first recording is printed with the figures.
 
 use std::path::PathBuf;
@@ -26,7 +29,10 @@ use std::time::Instant;
 
 use murk_campaign::Campaign;
 use murk_diagnose::DiagnoseParams;
-use murk_fixtures::{Generator, GeneratorConfig, OutputOptions, PerClass, Preset};
+use murk_fixtures::{
+    EffectFunction, EffectSpec, Generator, GeneratorConfig, Observable, OutputOptions, PerClass,
+    Preset,
+};
 use murk_types::WeatherClass;
 
 /// A `/proc/self/status` field in MB (`VmHWM`: peak resident set).
@@ -39,11 +45,12 @@ fn status_mb(field: &str) -> Option<f64> {
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let usage = "usage: diagnose_bench DIR N [--vlp16] [--azimuth DEG] [--keep]";
+    let usage = "usage: diagnose_bench DIR N [--vlp16] [--azimuth DEG] [--hide] [--keep]";
     let dir: PathBuf = args.first().map(PathBuf::from).ok_or(usage)?;
     let n: usize = args.get(1).ok_or(usage)?.parse()?;
     let vlp16 = args.iter().any(|a| a == "--vlp16");
     let keep = args.iter().any(|a| a == "--keep");
+    let hide = args.iter().any(|a| a == "--hide");
     let azimuth: Option<f64> = match args.iter().position(|a| a == "--azimuth") {
         Some(i) => Some(args.get(i + 1).ok_or(usage)?.parse()?),
         None => None,
@@ -52,7 +59,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         (true, _) => format!("vlp16-{n}"),
         (false, None) => format!("hdl64-{n}"),
         (false, Some(a)) => format!("hdl64-{a}-{n}"),
-    };
+    } + if hide { "-hide" } else { "" };
     let path = dir.join(&name);
     if !path.join("campaign.toml").is_file() {
         let t = Instant::now();
@@ -73,6 +80,21 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             rain: 0.0,
             snow: 0.0,
         };
+        if hide {
+            c.effects = vec![EffectSpec {
+                name: "lower beams see less far".into(),
+                observable: Observable::Survival,
+                survival_mode: None,
+                covariate: "elevation".into(),
+                weathers: vec![WeatherClass::Fog],
+                function: EffectFunction::Step {
+                    threshold: -10.0,
+                    below: 0.8,
+                    above: 1.0,
+                },
+                returns: None,
+            }];
+        }
         Generator::new(c)?.write_campaign(1, &OutputOptions::new(&path))?;
         println!(
             "generated {} in {:.1} s",
