@@ -115,7 +115,7 @@ pub use diagnostics::{
 pub use driver::{FitInputs, RecordingInput};
 pub use error::FitError;
 pub use hyperparams::{Band, EdgeShape, FitParams, FitValidParams, parse_edge};
-pub use state::{FitState, STATE_FORMAT, Selection};
+pub use state::{ClearPart, FitState, STATE_FORMAT, Selection};
 /// The maximum-likelihood survival fit on its own (a benchmark target and a
 /// building block for other estimators; `fit` calls it per band).
 pub use survival::{Obs, SurvivalOptions, fit_survival};

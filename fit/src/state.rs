@@ -262,6 +262,148 @@ pub struct FitState {
     released: bool,
 }
 
+/// The clear part of a fit, mapped once: the clear reference and its
+/// digest, the measured geometry, the clear recordings' file digests and
+/// radar detections, but not their cell images (released once the reference
+/// was built). Several fits over the same clear recordings and different
+/// degraded ones (murk diagnose's folds) share one
+/// ([`FitValidParams::fit_inputs_with`]) instead of each reading every clear
+/// recording and holding its image again.
+///
+/// ```no_run
+/// # fn main() -> Result<(), Box<dyn std::error::Error>> {
+/// use murk_fit::{FitInputs, FitParams};
+/// let campaign = murk_campaign::Campaign::open("fixtures/default-campaign")?;
+/// let inputs = FitInputs::from_campaign(&campaign);
+/// let params = FitParams::default().check()?;
+/// let clear = params.map_clear(&inputs)?;
+/// // The same table as `params.fit_inputs(&inputs)`.
+/// let table = params.fit_inputs_with(&inputs, &clear)?;
+/// # let _ = table;
+/// # Ok(())
+/// # }
+/// ```
+#[derive(Debug, Clone)]
+pub struct ClearPart {
+    state: FitState,
+}
+
+impl ClearPart {
+    /// Maps the clear recordings of `inputs`, builds the reference and
+    /// the clear digest, and releases the images.
+    fn map(inputs: &FitInputs, params: &FitValidParams) -> Result<ClearPart, FitError> {
+        let mut state = FitState::map(inputs, params, &Selection::All, None)?;
+        state.clear_reference()?;
+        state.clear_sha256();
+        for e in state.body.clear.values_mut() {
+            if let Some(image) = &mut e.image {
+                *image = CellImage::default();
+            }
+        }
+        state.released = true;
+        state.label = format!("the clear part of {}", inputs.name);
+        Ok(ClearPart { state })
+    }
+
+    /// The parameters the part was mapped under (a fit with others cannot
+    /// use it).
+    pub fn params(&self) -> &FitValidParams {
+        &self.state.body.params
+    }
+
+    /// The clear reference every degraded recording is paired against.
+    pub fn reference(&self) -> &ClearReference {
+        self.state
+            .reference
+            .get()
+            .expect("a clear part's reference is built when it is mapped")
+    }
+
+    /// The part re-keyed for `inputs` (the positions of its clear
+    /// recordings in `inputs`), refused unless `inputs` selects exactly
+    /// the same clear recordings, files and parameters.
+    fn for_inputs(
+        &self,
+        inputs: &FitInputs,
+        params: &FitValidParams,
+    ) -> Result<FitState, FitError> {
+        let c = &self.state;
+        let err = |reason: String| FitError::StateMismatch {
+            a: c.label.clone(),
+            b: format!("the fit of {}", inputs.name),
+            reason,
+        };
+        let (header, mut body) = FitState::skeleton(inputs, params)?;
+        if header.params_sha256 != c.header.params_sha256 {
+            return Err(err("fitted with different parameters".into()));
+        }
+        let theirs = c.clear_recordings();
+        let mine: Vec<(&str, &Path)> = clear_positions(inputs)
+            .into_iter()
+            .map(|i| {
+                (
+                    inputs.recordings[i].id.as_str(),
+                    inputs.recordings[i].lidar.as_path(),
+                )
+            })
+            .collect();
+        if mine != theirs {
+            return Err(err(format!(
+                "different clear recordings ({} against {}): a clear part serves fits of the same clear recordings only",
+                mine.len(),
+                theirs.len()
+            )));
+        }
+        // Positions in the part's campaign → positions in `inputs`.
+        let to_mine: BTreeMap<usize, usize> = clear_positions(&c.body.inputs)
+            .into_iter()
+            .zip(clear_positions(inputs))
+            .collect();
+        body.clear = c
+            .body
+            .clear
+            .iter()
+            .map(|(i, e)| (to_mine[i], e.clone()))
+            .collect();
+        body.radar = c
+            .body
+            .radar
+            .iter()
+            .filter_map(|(i, d)| Some((*to_mine.get(i)?, d.clone())))
+            .collect();
+        body.geometry = c.body.geometry.clone();
+        Ok(FitState {
+            header,
+            body,
+            label: c.label.clone(),
+            clear_sha256: c.clear_sha256.clone(),
+            reference: c.reference.clone(),
+            released: true,
+        })
+    }
+}
+
+impl FitValidParams {
+    /// Maps the clear part of `inputs` once, for several fits over the same
+    /// clear recordings ([`FitValidParams::fit_inputs_with`]).
+    pub fn map_clear(&self, inputs: &FitInputs) -> Result<ClearPart, FitError> {
+        ClearPart::map(inputs, self)
+    }
+
+    /// [`FitValidParams::fit_inputs`] with the clear part already mapped:
+    /// the same table, byte for byte, as long as `inputs` selects the same
+    /// clear recordings as the part's campaign (else an error says how they
+    /// differ); its degraded recordings may be any subset.
+    pub fn fit_inputs_with(
+        &self,
+        inputs: &FitInputs,
+        clear: &ClearPart,
+    ) -> Result<crate::FittedTable, FitError> {
+        let state = clear.for_inputs(inputs, self)?;
+        FitState::fit_with(inputs, self, state)
+    }
+}
+
 /// A murk-types value inside the binary body as its JSON text: those types
 /// leave out empty fields and read untagged values, which only a
 /// self-describing format can carry. serde_json reads floats back to the
@@ -457,39 +599,8 @@ impl FitState {
         selection: &Selection,
         reference: Option<&FitState>,
     ) -> Result<FitState, FitError> {
-        inputs.lidar.validate().map_err(|e| FitError::File {
-            path: inputs.dir.join("campaign.toml"),
-            reason: e.to_string(),
-        })?;
+        let (header, mut body) = FitState::skeleton(inputs, params)?;
         let clear_pos = clear_positions(inputs);
-        if clear_pos.is_empty() {
-            return Err(FitError::NoClearReference {
-                path: inputs.dir.clone(),
-                reason: "no recording was selected as clear (rules and review), so no degraded recording can be paired".into(),
-            });
-        }
-        let meta: Vec<Result<(PathBuf, String), FitError>> = inputs
-            .metadata
-            .par_iter()
-            .map(|p| Ok((p.clone(), sha256_hex(&read_file(p)?))))
-            .collect();
-        let metadata = meta.into_iter().collect::<Result<Vec<_>, _>>()?;
-        let header = Header {
-            tool: TOOL.to_string(),
-            params_sha256: params_sha256(params),
-            campaign_sha256: campaign_sha256(inputs, &metadata),
-        };
-        let mut body = Body {
-            params: params.clone(),
-            inputs: inputs.clone(),
-            metadata,
-            geometry: None,
-            clear: BTreeMap::new(),
-            reference_sha256: None,
-            degraded: BTreeMap::new(),
-            accs: BTreeMap::new(),
-            radar: BTreeMap::new(),
-        };
         let label;
         match reference {
             None => {
@@ -572,6 +683,45 @@ impl FitState {
         })
     }
 
+    /// The header and an empty body of a state of `inputs` under `params`
+    /// (the campaign checked, its metadata files digested).
+    fn skeleton(inputs: &FitInputs, params: &FitValidParams) -> Result<(Header, Body), FitError> {
+        inputs.lidar.validate().map_err(|e| FitError::File {
+            path: inputs.dir.join("campaign.toml"),
+            reason: e.to_string(),
+        })?;
+        let clear_pos = clear_positions(inputs);
+        if clear_pos.is_empty() {
+            return Err(FitError::NoClearReference {
+                path: inputs.dir.clone(),
+                reason: "no recording was selected as clear (rules and review), so no degraded recording can be paired".into(),
+            });
+        }
+        let meta: Vec<Result<(PathBuf, String), FitError>> = inputs
+            .metadata
+            .par_iter()
+            .map(|p| Ok((p.clone(), sha256_hex(&read_file(p)?))))
+            .collect();
+        let metadata = meta.into_iter().collect::<Result<Vec<_>, _>>()?;
+        let header = Header {
+            tool: TOOL.to_string(),
+            params_sha256: params_sha256(params),
+            campaign_sha256: campaign_sha256(inputs, &metadata),
+        };
+        let body = Body {
+            params: params.clone(),
+            inputs: inputs.clone(),
+            metadata,
+            geometry: None,
+            clear: BTreeMap::new(),
+            reference_sha256: None,
+            degraded: BTreeMap::new(),
+            accs: BTreeMap::new(),
+            radar: BTreeMap::new(),
+        };
+        Ok((header, body))
+    }
+
     /// Maps every recording (both phases) into one complete state: what
     /// [`FitValidParams::fit_inputs`] finishes.
     pub fn map_all(inputs: &FitInputs, params: &FitValidParams) -> Result<FitState, FitError> {
@@ -585,24 +735,38 @@ impl FitState {
     /// `map_all(..)?.finish()`, but the clear images (16 bytes per occupied
     /// cell of every clear recording, a campaign's largest summaries) are
     /// released as soon as the reference and the clear part's digest are
-    /// built, before the first degraded recording is read: at a thousand
-    /// recordings of HDL-64 size they are about 300 MB of a fit's peak.
-    /// The state never leaves this function, so nothing can write it.
+    /// built, before the first degraded recording is read
+    /// ([`ClearPart`]): at a thousand recordings of HDL-64 size they are
+    /// about 300 MB of a fit's peak.
     pub(crate) fn fit_all(
         inputs: &FitInputs,
         params: &FitValidParams,
     ) -> Result<FittedTable, FitError> {
-        let mut clear = FitState::map(inputs, params, &Selection::All, None)?;
-        clear.clear_reference()?;
-        clear.clear_sha256();
-        for e in clear.body.clear.values_mut() {
-            if let Some(image) = &mut e.image {
-                *image = CellImage::default();
-            }
-        }
-        clear.released = true;
+        let clear = ClearPart::map(inputs, params)?;
+        FitState::fit_with(inputs, params, clear.state)
+    }
+
+    /// Pairs the degraded recordings of `inputs` against a released clear
+    /// part of the same clear recordings and finishes.
+    fn fit_with(
+        inputs: &FitInputs,
+        params: &FitValidParams,
+        clear: FitState,
+    ) -> Result<FittedTable, FitError> {
         let degraded = FitState::map(inputs, params, &Selection::All, Some(&clear))?;
         clear.merge(degraded)?.finish()
+    }
+
+    /// The clear recordings of the state's campaign: (id, LiDAR file) in
+    /// campaign order.
+    fn clear_recordings(&self) -> Vec<(&str, &Path)> {
+        clear_positions(&self.body.inputs)
+            .into_iter()
+            .map(|i| {
+                let r = &self.body.inputs.recordings[i];
+                (r.id.as_str(), r.lidar.as_path())
+            })
+            .collect()
     }
 
     /// How errors name this state: its file when read from one.

@@ -344,3 +344,54 @@ fn degraded_states_of_another_reference_and_incomplete_merges_are_refused() {
         "{e}"
     );
 }
+
+/// A clear part mapped once (`map_clear`, its images released) serves fits
+/// of the same clear recordings with any subset of the degraded ones: each
+/// table is byte for byte the one of mapping and merging that subset with
+/// its images kept; other clear recordings or parameters are refused.
+#[test]
+fn a_clear_part_serves_fits_of_any_degraded_subset_byte_for_byte() {
+    let tmp = tempfile::tempdir().unwrap();
+    let p = params();
+    let mut rng = StdRng::seed_from_u64(21);
+    for dir in [default_campaign(), generated(tmp.path(), 5, 40)] {
+        let inputs = FitInputs::from_campaign(&Campaign::open(&dir).unwrap());
+        let clear = p.map_clear(&inputs).unwrap();
+        let mut subsets = vec![inputs.clone()];
+        for _ in 0..3 {
+            let mut sub = inputs.clone();
+            sub.recordings
+                .retain(|r| r.class == WeatherClass::Clear || rng.random_bool(0.6));
+            subsets.push(sub);
+        }
+        for sub in &subsets {
+            let kept = FitState::map_all(sub, &p).unwrap().finish().unwrap();
+            let with = p.fit_inputs_with(sub, &clear).unwrap();
+            assert_eq!(
+                with.to_json().unwrap(),
+                kept.to_json().unwrap(),
+                "{} with {} recordings",
+                dir.display(),
+                sub.recordings.len()
+            );
+        }
+        let mut fewer = inputs.clone();
+        let first = fewer
+            .recordings
+            .iter()
+            .position(|r| r.class == WeatherClass::Clear)
+            .unwrap();
+        fewer.recordings.remove(first);
+        let e = p.fit_inputs_with(&fewer, &clear).unwrap_err().to_string();
+        assert!(e.contains("different clear recordings"), "{e}");
+        let other = FitParams::default()
+            .bootstrap_replicates(60)
+            .check()
+            .unwrap();
+        let e = other
+            .fit_inputs_with(&inputs, &clear)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("different parameters"), "{e}");
+    }
+}
