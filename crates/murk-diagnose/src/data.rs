@@ -60,12 +60,14 @@ pub type SharedCells = std::sync::Arc<[(u32, u16)]>;
 
 /// A recording's survival units, held compactly: a bit per reference cell
 /// (is it a unit, or hidden behind a nearer weather return?) and its kept
-/// count in the narrowest integer that holds every count of the recording.
+/// count in the narrowest integer that holds every count of the recording
+/// (a bit when every count is 0 or 1).
 /// The cells and their expected returns are the reference's, shared by all
 /// recordings; a unit's trials are its cell's returns per scan times the
-/// recording's scans. About 1.1 bytes per reference cell for a single-scan
-/// recording, against 12 for a list of [`Unit`]s: at a thousand recordings
-/// of HDL-64 size the difference is about a gigabyte.
+/// recording's scans. Two bits per reference cell for a single scan of a
+/// sensor that fires each cell once (about 1.1 bytes when a cell holds
+/// several returns), against 12 bytes for a list of [`Unit`]s: at a
+/// thousand recordings of HDL-64 size the difference is about a gigabyte.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Units {
     cells: SharedCells,
@@ -78,6 +80,9 @@ pub struct Units {
 /// Kept counts, one per reference cell (0 where it is not a unit).
 #[derive(Debug, Clone, PartialEq)]
 enum KeptCounts {
+    /// Every count 0 or 1 (a single scan of a sensor firing each cell
+    /// once, the common case): a bit per cell.
+    Bit(Vec<u64>),
     U8(Vec<u8>),
     U16(Vec<u16>),
     U32(Vec<u32>),
@@ -86,6 +91,7 @@ enum KeptCounts {
 impl KeptCounts {
     fn get(&self, j: usize) -> u32 {
         match self {
+            KeptCounts::Bit(v) => (v[j / 64] >> (j % 64) & 1) as u32,
             KeptCounts::U8(v) => v[j] as u32,
             KeptCounts::U16(v) => v[j] as u32,
             KeptCounts::U32(v) => v[j],
@@ -94,6 +100,7 @@ impl KeptCounts {
 
     fn bytes(&self) -> usize {
         match self {
+            KeptCounts::Bit(v) => 8 * v.len(),
             KeptCounts::U8(v) => v.len(),
             KeptCounts::U16(v) => 2 * v.len(),
             KeptCounts::U32(v) => 4 * v.len(),
@@ -116,7 +123,13 @@ impl Units {
             }
         }
         let max = counts.iter().copied().max().unwrap_or(0);
-        let kept = if max <= u8::MAX as u32 {
+        let kept = if max <= 1 {
+            let mut bits = vec![0u64; n.div_ceil(64)];
+            for (j, &k) in counts.iter().enumerate() {
+                bits[j / 64] |= (k as u64) << (j % 64);
+            }
+            KeptCounts::Bit(bits)
+        } else if max <= u8::MAX as u32 {
             KeptCounts::U8(counts.iter().map(|&k| k as u8).collect())
         } else if max <= u16::MAX as u32 {
             KeptCounts::U16(counts.iter().map(|&k| k as u16).collect())
@@ -327,6 +340,10 @@ pub struct Loaded {
     pub columns: Vec<String>,
     /// The fit's view of the selected recordings.
     pub inputs: FitInputs,
+    /// The fit's clear part of the campaign (reference, digests, no
+    /// images) under each parameter set the baselines will be fitted with,
+    /// mapped once for every fit ([`load_with`]).
+    pub clear_parts: Vec<std::sync::Arc<murk_fit::ClearPart>>,
     /// Recordings of the weather left out, with the reason.
     pub skipped: Vec<(String, String)>,
 }
@@ -388,11 +405,27 @@ pub fn read_revolutions(path: &Path, spec: &LidarSpec) -> Result<(PointCloud, u3
 }
 
 /// Reads `campaign` for `weather`: the reference from every clear recording
-/// and the observations of every degraded recording of the weather.
+/// and the observations of every degraded recording of the weather (no
+/// clear part mapped for fits: [`load_with`]).
 pub fn load(
     campaign: &Campaign,
     weather: WeatherClass,
     params: &FitValidParams,
+) -> Result<Loaded, DiagnoseError> {
+    load_with(campaign, weather, params, &[])
+}
+
+/// [`load`], with the fit's clear part ([`Loaded::clear_parts`]) mapped
+/// under each of `fit_params`, the parameters the baselines will be
+/// fitted with. They are mapped before any degraded recording is read, so
+/// that their clear images (released once the reference is built) are
+/// never held beside the degraded recordings' summaries, and no baseline
+/// fit reads a clear recording again.
+pub fn load_with(
+    campaign: &Campaign,
+    weather: WeatherClass,
+    params: &FitValidParams,
+    fit_params: &[FitValidParams],
 ) -> Result<Loaded, DiagnoseError> {
     let inputs = FitInputs::from_campaign(campaign);
     let spec = inputs.lidar.clone();
@@ -458,6 +491,14 @@ pub fn load(
     }
     let reference = ClearReference::build(grid.clone(), &images, params);
     drop(images);
+    let mut clear_parts = Vec::with_capacity(fit_params.len());
+    for p in fit_params {
+        let part = p.map_clear(&inputs).map_err(|e| DiagnoseError::Fit {
+            what: "the clear recordings".into(),
+            source: Box::new(e),
+        })?;
+        clear_parts.push(std::sync::Arc::new(part));
+    }
     // What pairing does to range and reflectivity in clear weather, per
     // cell, summed in recording order (a few recordings at a time).
     let mut off = vec![(0.0f64, 0.0f64, 0u32); grid.cells()];
@@ -631,6 +672,7 @@ pub fn load(
         recs,
         columns,
         inputs,
+        clear_parts,
         skipped,
     })
 }
@@ -645,11 +687,12 @@ mod tests {
         // kept counts spread to the width under test; a list built the
         // plain way is the truth.
         // The last cell keeps all its trials: the largest count, which sets
-        // the width (1, 2 and 4 bytes).
-        for (frames, hits_max, scale, width) in [
-            (1u32, 3u16, 1u32, 1usize),
-            (40, 9, 7, 2),
-            (600, 200, 997, 4),
+        // the width (a bit, then 1, 2 and 4 bytes per cell).
+        for (frames, hits_max, scale, kept_bytes) in [
+            (1u32, 1u16, 1u32, 8 * 3usize),
+            (1, 3, 1, 130),
+            (40, 9, 7, 2 * 130),
+            (600, 200, 997, 4 * 130),
         ] {
             let cells: SharedCells = (0..130u32)
                 .map(|j| (7 * j + 2, 1 + (j % hits_max as u32) as u16))
@@ -677,7 +720,7 @@ mod tests {
             assert_eq!(units.iter().collect::<Vec<_>>(), truth, "frames {frames}");
             assert_eq!(units.len(), truth.len());
             assert!(!units.is_empty());
-            assert_eq!(units.heap_bytes(), 8 * 3 + width * 130, "frames {frames}");
+            assert_eq!(units.heap_bytes(), 8 * 3 + kept_bytes, "frames {frames}");
         }
         let none = Units::new(SharedCells::from(vec![(0, 1)]), 1, |_| None);
         assert!(none.is_empty());

@@ -740,7 +740,13 @@ impl DiagnoseValidParams {
     pub fn run(&self, campaign: &Campaign) -> Result<Diagnosis, DiagnoseError> {
         let p = &self.0;
         let fit_params = self.fit_params()?;
-        let loaded = data::load(campaign, p.weather, &fit_params)?;
+        // The clear part of every baseline fit (the folds' and the final
+        // one), mapped once; none when the baseline is a table given.
+        let fits = match p.coefficients {
+            Some(_) => vec![],
+            None => vec![self.fold_fit_params()?, fit_params.clone()],
+        };
+        let loaded = data::load_with(campaign, p.weather, &fit_params, &fits)?;
         let n = loaded.recs.len();
         if n < MIN_RECORDINGS {
             return Err(DiagnoseError::Campaign {
@@ -998,7 +1004,13 @@ impl DiagnoseValidParams {
             r.class == WeatherClass::Clear
                 || (r.class == loaded.weather && ids.contains(r.id.as_str()))
         });
-        let fitted = params.fit_inputs(&inputs).map_err(|e| DiagnoseError::Fit {
+        // A clear part mapped at loading under these parameters serves;
+        // without one the fit maps its own.
+        let fitted = match loaded.clear_parts.iter().find(|c| c.params() == params) {
+            Some(clear) => params.fit_inputs_with(&inputs, clear),
+            None => params.fit_inputs(&inputs),
+        };
+        let fitted = fitted.map_err(|e| DiagnoseError::Fit {
             what: what.to_string(),
             source: Box::new(e),
         })?;
