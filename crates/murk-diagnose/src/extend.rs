@@ -23,6 +23,11 @@
 //! Bins with too little data (fewer than [`MIN_TRIALS`] returns, or no
 //! recording) take the pooled value, which is also the term's default.
 //!
+//! A survival term is fitted on at most about [`SURVIVAL_FIT_UNITS`] units:
+//! a larger fit set is thinned to the same fraction of every recording's
+//! units, by a hash of recording and cell, so the term's fit takes the same
+//! time and memory at forty recordings as at a thousand.
+//!
 //! Beside the bins a numeric covariate's term can take other [`Shape`]s
 //! ([`fit_shaped`]); `stagewise` fits each one per fold and keeps the one
 //! the held-out recordings prefer:
@@ -60,6 +65,31 @@ use crate::evaluate::{P_FLOOR, RecEval, applier, extension_value};
 
 /// Fewest returns for a bin of its own.
 pub const MIN_TRIALS: f64 = 50.0;
+
+/// Most survival units a survival term is fitted on. Its likelihood is
+/// summed over every unit some hundreds of times (golden-section searches
+/// per bin, the soft edge re-fitted), so beyond this the fit set's units are
+/// thinned to a fixed fraction of each recording ([`keeps_unit`]): a term's
+/// few parameters are pinned long before half a million units, while the
+/// time and memory of the fit would otherwise grow with the campaign (40
+/// HDL-64-size recordings, 2.2 M units: 13 minutes).
+pub const SURVIVAL_FIT_UNITS: usize = 1 << 19;
+
+/// Whether the unit of reference cell `cell` in the recording at campaign
+/// position `order` is among a `fraction` of the units: a hash of the two
+/// (SplitMix64's finaliser) below `fraction · 2⁶⁴`. Not a random draw: the
+/// same units on any seed, fold and thread count, and a unit kept at one
+/// fraction is kept at every larger one.
+fn keeps_unit(order: usize, cell: u32, fraction: f64) -> bool {
+    if fraction >= 1.0 {
+        return true;
+    }
+    let mut z = ((order as u64) << 32 | cell as u64).wrapping_add(0x9e37_79b9_7f4a_7c15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^= z >> 31;
+    (z as f64) < fraction * 2f64.powi(64)
+}
 
 /// A covariate value for a survival/range/intensity item.
 fn bin_of(
@@ -285,11 +315,18 @@ fn fit_bins(
     let mut edge = None;
     let (values, default): (Vec<Option<f64>>, f64) = match observable {
         ExtensionObservable::Survival => {
-            let data = SurvivalData::new(loaded, table, evals, covariate, Some(binning))?;
+            let data = SurvivalData::new(
+                loaded,
+                table,
+                evals,
+                covariate,
+                Some(binning),
+                SURVIVAL_FIT_UNITS,
+            )?;
             for it in &data.items {
                 let n = it.trials as f64;
-                weights[it.bin as usize] += n;
-                xsum[it.bin as usize] += n * it.x;
+                weights[data.bin(it)] += n;
+                xsum[data.bin(it)] += n * data.x(it);
             }
             let (v, pooled, e) = data.fit_bins(nb, refit_edge);
             edge = e;
@@ -393,13 +430,13 @@ fn fit_bins(
     })
 }
 
-/// One survival unit: a reference cell of one recording. Compact (40
-/// bytes; a fit set has millions): the cell's range and reflectivity are
-/// looked up from its cell, the MOR from its recording's applier.
+/// One survival unit: a reference cell of one recording. Compact (24
+/// bytes; a fit set has tens of millions at a thousand recordings of
+/// HDL-64 size): the cell's range and reflectivity are looked up from its
+/// cell, the MOR from its recording's applier, the covariate's value and
+/// bin from [`ByUnit`] tables.
 #[derive(Debug, Clone, Copy)]
 struct Item {
-    /// Its bin (0 without a binning).
-    bin: u32,
     /// Index of its recording's applier.
     applier: u32,
     /// Reference cell.
@@ -410,42 +447,98 @@ struct Item {
     trials: u32,
     /// Factor of the terms the table already has.
     base: f64,
-    /// The covariate's numeric value (NaN when it has none).
-    x: f64,
 }
 
-/// The fit set's survival units under a table, for likelihood fits of a
-/// factor on the vanishing distance.
+/// A value of a survival unit that depends on its cell alone (a point
+/// covariate's) or on its recording alone (a scan covariate's), held once
+/// per cell or per recording instead of once per unit.
+#[derive(Debug, Clone)]
+enum ByUnit<T> {
+    /// Indexed by reference cell (grid index).
+    Cell(Vec<T>),
+    /// Indexed by the unit's applier (its recording).
+    Recording(Vec<T>),
+}
+
+impl<T: Copy> ByUnit<T> {
+    fn of(&self, it: &Item) -> T {
+        match self {
+            ByUnit::Cell(v) => v[it.cell as usize],
+            ByUnit::Recording(v) => v[it.applier as usize],
+        }
+    }
+
+    /// Sets the value of `it`'s cell or recording.
+    fn set(&mut self, it: &Item, value: T) {
+        match self {
+            ByUnit::Cell(v) => v[it.cell as usize] = value,
+            ByUnit::Recording(v) => v[it.applier as usize] = value,
+        }
+    }
+}
+
+/// The fit set's survival units under a table (thinned to about
+/// [`SURVIVAL_FIT_UNITS`]), for likelihood fits of a factor on the
+/// vanishing distance.
 struct SurvivalData<'a> {
     loaded: &'a Loaded,
     appliers: Vec<murk_infer::Applier>,
     /// The MOR of each applier's recording.
     mors: Vec<f64>,
     items: Vec<Item>,
+    /// The covariate's numeric value (NaN when it has none) per unit.
+    x: ByUnit<f64>,
+    /// The unit's bin (0 without a binning).
+    bin: ByUnit<u32>,
     soft: bool,
     eps0: f64,
     pi0: f64,
 }
 
 impl<'a> SurvivalData<'a> {
-    /// Units of `evals` (those the binning places, when one is given).
+    /// Units of `evals` (those the binning places, when one is given),
+    /// thinned to about `cap` when there are more ([`keeps_unit`]).
     fn new(
         loaded: &'a Loaded,
         table: &CoefficientTable,
         evals: &[RecEval],
         covariate: &str,
         binning: Option<&Binning>,
+        cap: usize,
     ) -> Result<SurvivalData<'a>, DiagnoseError> {
         let cell = |c: u32| loaded.cells[c as usize].expect("reference cell");
         let mut appliers = Vec::with_capacity(evals.len());
         let mut mors = Vec::with_capacity(evals.len());
         let mut items: Vec<Item> = Vec::new();
+        // A point covariate's value is its cell's, a scan covariate's its
+        // recording's (the covariate's kind, whatever its name).
+        let by_cell = loaded
+            .cells
+            .iter()
+            .flatten()
+            .next()
+            .is_some_and(|c| c.cov.get(covariate).is_some());
+        let (mut xs, mut bins) = if by_cell {
+            let n = loaded.cells.len();
+            (ByUnit::Cell(vec![f64::NAN; n]), ByUnit::Cell(vec![0; n]))
+        } else {
+            let n = evals.len();
+            (
+                ByUnit::Recording(vec![f64::NAN; n]),
+                ByUnit::Recording(vec![0; n]),
+            )
+        };
+        let total: usize = evals.iter().map(|e| loaded.recs[e.rec].units.len()).sum();
+        let fraction = cap as f64 / total.max(1) as f64;
         for e in evals {
             let rec = &loaded.recs[e.rec];
             appliers.push(applier(table, loaded, rec, false, 0)?);
             mors.push(rec.mor);
             let a = (appliers.len() - 1) as u32;
             for u in rec.units.iter() {
+                if !keeps_unit(rec.order, u.cell, fraction) {
+                    continue;
+                }
                 let c = cell(u.cell);
                 let bin = match binning {
                     Some(b) => match bin_of(b, covariate, &c.cov, &rec.scan) {
@@ -466,15 +559,16 @@ impl<'a> SurvivalData<'a> {
                     &rec.scan,
                     rec.mor,
                 );
-                items.push(Item {
-                    bin: bin as u32,
+                let it = Item {
                     applier: a,
                     cell: u.cell,
                     kept: u.kept,
                     trials: u.trials,
                     base,
-                    x,
-                });
+                };
+                xs.set(&it, x);
+                bins.set(&it, bin as u32);
+                items.push(it);
             }
         }
         let soft = crate::evaluate::has_soft_edge(table, loaded);
@@ -488,6 +582,8 @@ impl<'a> SurvivalData<'a> {
             appliers,
             mors,
             items,
+            x: xs,
+            bin: bins,
             soft,
             eps0,
             pi0,
@@ -531,6 +627,16 @@ impl<'a> SurvivalData<'a> {
     /// The recording's MOR of an item.
     fn mor(&self, it: &Item) -> f64 {
         self.mors[it.applier as usize]
+    }
+
+    /// The covariate's value of an item (NaN when it has none).
+    fn x(&self, it: &Item) -> f64 {
+        self.x.of(it)
+    }
+
+    /// The bin of an item.
+    fn bin(&self, it: &Item) -> usize {
+        self.bin.of(it) as usize
     }
 
     /// Σ over the items (`None`: all of them; else those at the indices
@@ -589,7 +695,7 @@ impl<'a> SurvivalData<'a> {
         // Indices of each bin's items, in item order.
         let mut by_bin: Vec<Vec<u32>> = vec![Vec::new(); nb];
         for (i, it) in self.items.iter().enumerate() {
-            by_bin[it.bin as usize].push(i as u32);
+            by_bin[self.bin(it)].push(i as u32);
         }
         let factors = |e: &EdgeRefit| -> (Vec<Option<f64>>, f64) {
             let ml = |its: Option<&[u32]>| -> f64 {
@@ -620,7 +726,7 @@ impl<'a> SurvivalData<'a> {
         }
         for _ in 0..2 {
             let fs: Vec<f64> = v.iter().map(|x| x.unwrap_or(pooled)).collect();
-            e = self.refit_edge(e, &|it| fs[it.bin as usize]);
+            e = self.refit_edge(e, &|it| fs[self.bin(it)]);
             (v, pooled) = factors(&e);
         }
         (v, pooled, Some(e))
@@ -633,7 +739,7 @@ impl<'a> SurvivalData<'a> {
             golden(
                 |k| {
                     self.sum(None, &|it| {
-                        self.nll_item(it, (-k * it.x / self.mor(it)).exp(), e)
+                        self.nll_item(it, (-k * self.x(it) / self.mor(it)).exp(), e)
                     })
                 },
                 -ATTENUATION_K_MAX,
@@ -646,7 +752,7 @@ impl<'a> SurvivalData<'a> {
             return (k, None);
         }
         for _ in 0..2 {
-            e = self.refit_edge(e, &|it| (-k * it.x / self.mor(it)).exp());
+            e = self.refit_edge(e, &|it| (-k * self.x(it) / self.mor(it)).exp());
             k = ml(&e);
         }
         (k, Some(e))
@@ -949,7 +1055,7 @@ fn fit_parametric(
         if shape != Shape::Attenuation {
             return Ok(None);
         }
-        let data = SurvivalData::new(loaded, table, evals, covariate, None)?;
+        let data = SurvivalData::new(loaded, table, evals, covariate, None, SURVIVAL_FIT_UNITS)?;
         if data.items.is_empty() {
             return Ok(None);
         }
@@ -1109,6 +1215,117 @@ pub struct EdgeRefit {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_unit_hash_keeps_its_fraction_on_every_ring_and_nests() {
+        // An HDL-64-like grid (64 rings × 4,000 azimuths, ring-major and
+        // azimuth-major cell numbering both) over 30 recordings.
+        for fraction in [0.05, 0.25, 0.6] {
+            for ring_major in [true, false] {
+                let mut per_ring = vec![(0u64, 0u64); 64];
+                for order in 0..30 {
+                    for ring in 0..64u32 {
+                        for az in 0..4000u32 {
+                            let cell = if ring_major {
+                                ring * 4000 + az
+                            } else {
+                                az * 64 + ring
+                            };
+                            let k = keeps_unit(order, cell, fraction);
+                            per_ring[ring as usize].0 += k as u64;
+                            per_ring[ring as usize].1 += 1;
+                            if k {
+                                assert!(keeps_unit(order, cell, fraction + 0.1));
+                            }
+                        }
+                    }
+                }
+                for (ring, &(k, n)) in per_ring.iter().enumerate() {
+                    let f = k as f64 / n as f64;
+                    // 120,000 units per ring: binomial sd ≤ 0.0015.
+                    assert!(
+                        (f - fraction).abs() < 0.01,
+                        "ring {ring}: {f} kept for {fraction} ({ring_major})"
+                    );
+                }
+            }
+        }
+        assert!((0..1000).all(|c| keeps_unit(3, c, 1.0)));
+    }
+
+    /// A generated fog campaign whose lower beams see less far (a factor
+    /// 0.8 on the vanishing distance below −10° elevation, against 1 above).
+    fn hidden_survival_campaign(seed: u64) -> (tempfile::TempDir, Loaded) {
+        use murk_fixtures::{
+            EffectFunction, EffectSpec, Generator, GeneratorConfig, Observable, OutputOptions,
+            PerClass, Preset,
+        };
+        let mut c = GeneratorConfig::preset(Preset::Small);
+        c.campaign.recordings = 24;
+        c.weather.mix = PerClass {
+            clear: 0.25,
+            fog: 0.75,
+            rain: 0.0,
+            snow: 0.0,
+        };
+        c.effects = vec![EffectSpec {
+            name: "lower beams see less far".into(),
+            observable: Observable::Survival,
+            survival_mode: None,
+            covariate: "elevation".into(),
+            weathers: vec![murk_types::WeatherClass::Fog],
+            function: EffectFunction::Step {
+                threshold: -10.0,
+                below: 0.8,
+                above: 1.0,
+            },
+            returns: None,
+        }];
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("campaign");
+        Generator::new(c)
+            .unwrap()
+            .write_campaign(seed, &OutputOptions::new(&out))
+            .unwrap();
+        let campaign = murk_campaign::Campaign::open(&out).unwrap();
+        let params = murk_fit::FitParams::default().check().unwrap();
+        let loaded = crate::data::load(&campaign, murk_types::WeatherClass::Fog, &params).unwrap();
+        (dir, loaded)
+    }
+
+    #[test]
+    fn a_thinned_survival_fit_finds_the_factors_of_the_full_one() {
+        let params = murk_fit::FitParams::default().check().unwrap();
+        for seed in [3, 4] {
+            let (_dir, loaded) = hidden_survival_campaign(seed);
+            let table = params.fit_inputs(&loaded.inputs).unwrap().table().clone();
+            let all: Vec<usize> = (0..loaded.recs.len()).collect();
+            let evals = crate::evaluate::evaluate(&loaded, &table, &all, None, &params).unwrap();
+            let binning = Binning::Numeric { edges: vec![-10.0] };
+            let fit = |cap: usize| {
+                let d =
+                    SurvivalData::new(&loaded, &table, &evals, "elevation", Some(&binning), cap)
+                        .unwrap();
+                let n = d.items.len();
+                let (v, _, _) = d.fit_bins(binning.len(), false);
+                (n, v[0].unwrap() / v[1].unwrap())
+            };
+            let (n_full, full) = fit(usize::MAX);
+            let (n_thin, thin) = fit(n_full / 5);
+            // The thinned set is a fifth of the full one (hash sampling).
+            let share = n_thin as f64 / n_full as f64;
+            assert!(
+                (share - 0.2).abs() < 0.02,
+                "seed {seed}: {n_thin} of {n_full}"
+            );
+            // Lower over upper beams' factor: the hidden 0.8 by both.
+            assert!((full - 0.8).abs() < 0.05, "seed {seed}: full fit {full}");
+            assert!(
+                (thin - full).abs() < 0.03,
+                "seed {seed}: thinned {thin} vs full {full}"
+            );
+        }
+    }
 
     #[test]
     fn isotonic_pools_violators() {
