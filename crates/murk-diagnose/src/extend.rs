@@ -69,7 +69,7 @@ pub const MIN_TRIALS: f64 = 50.0;
 /// Most survival units a survival term is fitted on. Its likelihood is
 /// summed over every unit some hundreds of times (golden-section searches
 /// per bin, the soft edge re-fitted), so beyond this the fit set's units are
-/// thinned to a fixed fraction of each recording ([`keeps_unit`]): a term's
+/// thinned to a fixed fraction of each recording (by a hash of recording and cell): a term's
 /// few parameters are pinned long before half a million units, while the
 /// time and memory of the fit would otherwise grow with the campaign (40
 /// HDL-64-size recordings, 2.2 M units: 13 minutes).
