@@ -257,8 +257,8 @@ pub struct FitState {
     /// The clear reference, once built.
     reference: OnceLock<Arc<ClearReference>>,
     /// The clear images were released after the reference and the clear
-    /// digest were built ([`FitState::fit_all`]): the state can still
-    /// pair and finish, but not be written.
+    /// digest were built ([`ClearPart`]): the state can still pair and
+    /// finish, but not be written.
     released: bool,
 }
 
@@ -311,14 +311,6 @@ impl ClearPart {
         &self.state.body.params
     }
 
-    /// The clear reference every degraded recording is paired against.
-    pub fn reference(&self) -> &ClearReference {
-        self.state
-            .reference
-            .get()
-            .expect("a clear part's reference is built when it is mapped")
-    }
-
     /// The part re-keyed for `inputs` (the positions of its clear
     /// recordings in `inputs`), refused unless `inputs` selects exactly
     /// the same clear recordings, files and parameters.
@@ -337,16 +329,7 @@ impl ClearPart {
         if header.params_sha256 != c.header.params_sha256 {
             return Err(err("fitted with different parameters".into()));
         }
-        let theirs = c.clear_recordings();
-        let mine: Vec<(&str, &Path)> = clear_positions(inputs)
-            .into_iter()
-            .map(|i| {
-                (
-                    inputs.recordings[i].id.as_str(),
-                    inputs.recordings[i].lidar.as_path(),
-                )
-            })
-            .collect();
+        let (mine, theirs) = (clear_recordings(inputs), clear_recordings(&c.body.inputs));
         if mine != theirs {
             return Err(err(format!(
                 "different clear recordings ({} against {}): a clear part serves fits of the same clear recordings only",
@@ -563,6 +546,17 @@ fn read_radars(
         .collect()
 }
 
+/// The clear recordings of `inputs`: (id, LiDAR file) in campaign order.
+fn clear_recordings(inputs: &FitInputs) -> Vec<(&str, &Path)> {
+    clear_positions(inputs)
+        .into_iter()
+        .map(|i| {
+            let r = &inputs.recordings[i];
+            (r.id.as_str(), r.lidar.as_path())
+        })
+        .collect()
+}
+
 fn names(inputs: &FitInputs, idx: &[usize]) -> String {
     const SHOWN: usize = 5;
     let mut s: Vec<String> = idx
@@ -755,18 +749,6 @@ impl FitState {
     ) -> Result<FittedTable, FitError> {
         let degraded = FitState::map(inputs, params, &Selection::All, Some(&clear))?;
         clear.merge(degraded)?.finish()
-    }
-
-    /// The clear recordings of the state's campaign: (id, LiDAR file) in
-    /// campaign order.
-    fn clear_recordings(&self) -> Vec<(&str, &Path)> {
-        clear_positions(&self.body.inputs)
-            .into_iter()
-            .map(|i| {
-                let r = &self.body.inputs.recordings[i];
-                (r.id.as_str(), r.lidar.as_path())
-            })
-            .collect()
     }
 
     /// How errors name this state: its file when read from one.
