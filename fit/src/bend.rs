@@ -8,7 +8,7 @@
 //!   exponent, edge width, ε and π) by maximum likelihood: for a fixed `c`,
 //!   `r/(ρ·MOR^c) = u·MOR^(1−c)` with `u = r/(MOR·ρ)`, so every recording's
 //!   trials move along `ln u` by `(1 − c)·ln MOR` and the survival fit runs
-//!   unchanged on them; `c` is profiled (argmin's golden-section search);
+//!   unchanged on them; `c` is profiled (Brent's method, argmin's);
 //! - chooses between the line and the power law on held-out recordings
 //!   (folds over recordings, per-recording log-likelihood gains, one-sided
 //!   sign-flip test), so the line stays unless the bend predicts recordings

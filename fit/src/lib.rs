@@ -116,6 +116,9 @@ pub use driver::{FitInputs, RecordingInput};
 pub use error::FitError;
 pub use hyperparams::{Band, EdgeShape, FitParams, FitValidParams, parse_edge};
 pub use state::{ClearPart, FitState, STATE_FORMAT, Selection};
+/// The one-dimensional bounded minimiser (Brent's method) that profiles the
+/// bending law's exponent, shared with the diagnosis's extension terms.
+pub use stats::optim::minimize_scalar;
 /// The maximum-likelihood survival fit on its own (a benchmark target and a
 /// building block for other estimators; `fit` calls it per band).
 pub use survival::{Obs, SurvivalOptions, fit_survival};
