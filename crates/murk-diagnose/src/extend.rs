@@ -6,8 +6,8 @@
 //! the baseline model's own predictions:
 //!
 //! - `survival`: the factor on the vanishing distance that maximises the
-//!   Bernoulli likelihood of the bin's kept/lost returns (golden-section
-//!   search on `ln f` in [ln 0.2, ln 5]);
+//!   Bernoulli likelihood of the bin's kept/lost returns (Brent's method
+//!   on `ln f` in [ln 0.2, ln 5]);
 //! - `range`: the mean range residual of the bin's kept returns;
 //! - `intensity`: `exp` of the mean log ratio of measured to reference
 //!   reflectivity;
@@ -39,11 +39,11 @@
 //!   returns) through the bins' estimates, linear between the bins'
 //!   weighted mean covariate values;
 //! - `attenuation` (survival, intensity): `exp(−k·x/MOR)`, `k` by maximum
-//!   likelihood (survival, golden-section search, the soft edge re-fitted
+//!   likelihood (survival, Brent's method, the soft edge re-fitted
 //!   with it) or least squares on the log ratio (intensity, closed form);
 //! - `linear` (range): `a + b·x`, least squares;
 //! - `power` (range, intensity; covariates > 0): `a·x^b`, least squares
-//!   (intensity on the log ratio, closed form; range by golden-section on
+//!   (intensity on the log ratio, closed form; range by Brent's method on
 //!   `b` with `a` closed form).
 //!
 //! The closed-form parameters carry a 95 % interval from a bootstrap over
@@ -67,7 +67,7 @@ use crate::evaluate::{P_FLOOR, RecEval, applier, extension_value};
 pub const MIN_TRIALS: f64 = 50.0;
 
 /// Most survival units a survival term is fitted on. Its likelihood is
-/// summed over every unit some hundreds of times (golden-section searches
+/// summed over every unit some hundreds of times (one-dimensional searches
 /// per bin, the soft edge re-fitted), so beyond this the fit set's units are
 /// thinned to a fixed fraction of each recording (by a hash of recording and cell): a term's
 /// few parameters are pinned long before half a million units, while the
@@ -120,31 +120,14 @@ fn x_of(
     }
 }
 
-/// Golden-section steps: the bracket shrinks by 0.618 per step (to 1e−7 of
-/// its width).
-const GOLDEN_STEPS: usize = 34;
-
-fn golden(mut f: impl FnMut(f64) -> f64, mut a: f64, mut b: f64) -> f64 {
-    let g = (5f64.sqrt() - 1.0) / 2.0;
-    let mut c = b - g * (b - a);
-    let mut d = a + g * (b - a);
-    let (mut fc, mut fd) = (f(c), f(d));
-    for _ in 0..GOLDEN_STEPS {
-        if fc < fd {
-            b = d;
-            d = c;
-            fd = fc;
-            c = b - g * (b - a);
-            fc = f(c);
-        } else {
-            a = c;
-            c = d;
-            fc = fd;
-            d = a + g * (b - a);
-            fd = f(d);
-        }
-    }
-    0.5 * (a + b)
+/// Where `f` is least on `[a, b]`, to within about `1e−8·(b − a)`:
+/// murk-fit's [`murk_fit::minimize_scalar`] (Brent's method), the midpoint
+/// if the search cannot run. A survival term's likelihood is a sum over up
+/// to [`SURVIVAL_FIT_UNITS`] units, so every evaluation is one pass over
+/// them: the parabolic steps reach the tolerance in about a third of the
+/// passes a fixed golden-section search needs.
+fn minimize_1d(f: impl Fn(f64) -> f64, a: f64, b: f64) -> f64 {
+    murk_fit::minimize_scalar(&f, a, b, 2e-8 * (b - a)).unwrap_or(0.5 * (a + b))
 }
 
 /// Fits the term on `observable` along `covariate` (bins `binning`) from the
@@ -672,7 +655,7 @@ impl<'a> SurvivalData<'a> {
     fn refit_edge(&self, e: EdgeRefit, fs: &(dyn Fn(&Item) -> f64 + Sync)) -> EdgeRefit {
         let mut e = e;
         let total = |e: &EdgeRefit| self.sum(None, &|it| self.nll_item(it, fs(it), e));
-        e.width_factor = golden(
+        e.width_factor = minimize_1d(
             |lm| {
                 total(&EdgeRefit {
                     width_factor: lm.exp(),
@@ -683,8 +666,8 @@ impl<'a> SurvivalData<'a> {
             4f64.ln(),
         )
         .exp();
-        e.residual = golden(|x| total(&EdgeRefit { residual: x, ..e }), 0.0, 0.5);
-        e.dropout = golden(|x| total(&EdgeRefit { dropout: x, ..e }), 0.0, 0.5);
+        e.residual = minimize_1d(|x| total(&EdgeRefit { residual: x, ..e }), 0.0, 0.5);
+        e.dropout = minimize_1d(|x| total(&EdgeRefit { dropout: x, ..e }), 0.0, 0.5);
         e
     }
 
@@ -699,7 +682,7 @@ impl<'a> SurvivalData<'a> {
         }
         let factors = |e: &EdgeRefit| -> (Vec<Option<f64>>, f64) {
             let ml = |its: Option<&[u32]>| -> f64 {
-                golden(
+                minimize_1d(
                     |lf| self.sum(its, &|it| self.nll_item(it, lf.exp(), e)),
                     0.2f64.ln(),
                     5f64.ln(),
@@ -736,7 +719,7 @@ impl<'a> SurvivalData<'a> {
     /// soft edge re-fitted with it when `refit_edge`.
     fn fit_attenuation(&self, refit_edge: bool) -> (f64, Option<EdgeRefit>) {
         let ml = |e: &EdgeRefit| {
-            golden(
+            minimize_1d(
                 |k| {
                     self.sum(None, &|it| {
                         self.nll_item(it, (-k * self.x(it) / self.mor(it)).exp(), e)
@@ -1183,7 +1166,7 @@ fn fit_parametric(
                     (0.0, syy)
                 }
             };
-            let b = golden(|b| a_of(b).1, -POWER_EXPONENT_MAX, POWER_EXPONENT_MAX);
+            let b = minimize_1d(|b| a_of(b).1, -POWER_EXPONENT_MAX, POWER_EXPONENT_MAX);
             let (a, _) = a_of(b);
             pooled_fit(
                 default,
@@ -1364,12 +1347,5 @@ mod tests {
         let iv = bootstrap_lines(&per, false, 50, 7).unwrap();
         assert!(iv[1][0] <= -2.0 + 1e-9 && iv[1][1] >= -2.0 - 1e-9, "{iv:?}");
         assert!(bootstrap_lines(&per[..1], false, 50, 7).is_none());
-    }
-
-    #[test]
-    fn golden_finds_a_minimum() {
-        // 34 steps shrink the bracket of width 5 to 4e−7.
-        let x = golden(|x| (x - 0.7).powi(2), -2.0, 3.0);
-        assert!((x - 0.7).abs() < 1e-6, "{x}");
     }
 }

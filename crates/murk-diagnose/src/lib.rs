@@ -726,7 +726,7 @@ impl DiagnoseValidParams {
     /// without the comparison of the bending law with the line
     /// (`compare_laws` off). A baseline is only simulated, and the law it
     /// applies is the line either way (`apply_bend` is off), while the
-    /// comparison — the bend's exponent profiled by golden section in every
+    /// comparison — the bend's exponent profiled (a survival fit per step) in every
     /// band, again in each of its folds — was about nine tenths of a fit's
     /// time. The table fitted on every recording, which the diagnosis
     /// publishes, keeps it.
