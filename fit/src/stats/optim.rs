@@ -92,7 +92,7 @@ impl<F: Fn(f64) -> f64> CostFunction for Scalar<'_, F> {
 /// golden-section step where a parabola would leave the bracket or stall);
 /// the result is within about `tol + 3e−8·|x|` of the minimum, which may
 /// lie at either end of the bracket. A non-finite cost counts as
-/// [`INVALID`]. Returns the best point evaluated, `None` when the search
+/// `INVALID` (1e300). Returns the best point evaluated, `None` when the search
 /// could not run. Deterministic.
 ///
 /// Every cost here is a pass over many units or a whole survival fit, so
