@@ -111,6 +111,13 @@ pub fn fit_band_at(
 
 /// Fits the power law of band `band` on `recs` (profile likelihood over
 /// its exponent; the band's own edge width, ε and π).
+///
+/// The profile is not smooth: every exponent re-bins the trials at the
+/// histogram's step in `ln u`, so neighbouring exponents 0.005 apart can
+/// differ by tens of nats (measured on the physics-fog campaigns of
+/// `fit/tests/bend.rs`), and the search returns a local optimum near the
+/// global one. Two searches (golden section, Brent) landed 0.009–0.022
+/// apart there, inside the exponent's bootstrap interval (±0.02–0.06).
 pub fn fit_power(
     recs: &[&RecordingTrials],
     n_bands: usize,
