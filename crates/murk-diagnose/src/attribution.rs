@@ -315,6 +315,119 @@ pub fn point_test(
     )
 }
 
+/// What a point-level test reads of its units: per recording and bin the
+/// sums Σw·e and Σw, and per bin Σw·x (for the profile's centres).
+///
+/// The sums are all a test keeps, so one pass over an observable's units
+/// can fill the sums of every covariate's test at once ([`PointSums::row`]
+/// per recording, in parallel), instead of a pass per test: a pass computes
+/// every unit's residual (a keep probability per reference cell), which is
+/// what a diagnosis spends its attribution time on. Σw·x is summed per
+/// recording and the recordings' sums added in recording order, so a
+/// streamed and a batched accumulation give the same bits.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PointSums {
+    /// Bins (at least 1).
+    nb: usize,
+    /// Σw·e per recording and bin (`r · nb + bin`).
+    s: Vec<f64>,
+    /// Σw per recording and bin.
+    w: Vec<f64>,
+    /// Σw·x per bin.
+    xs: Vec<f64>,
+}
+
+/// One recording's part of a [`PointSums`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct PointRow {
+    /// Σw·e per bin.
+    s: Vec<f64>,
+    /// Σw per bin.
+    w: Vec<f64>,
+    /// Σw·x per bin.
+    xs: Vec<f64>,
+}
+
+impl PointRow {
+    /// An empty row for `binning`.
+    pub fn new(binning: &Binning) -> PointRow {
+        let nb = binning.len().max(1);
+        PointRow {
+            s: vec![0.0; nb],
+            w: vec![0.0; nb],
+            xs: vec![0.0; nb],
+        }
+    }
+
+    /// Adds a unit of covariate value `x`, residual `e`, weight `wt`
+    /// (nothing when `binning` places no bin at `x`).
+    #[inline]
+    pub fn add(&mut self, binning: &Binning, x: f64, e: f64, wt: f64) {
+        if let Some(b) = binning.of_number(x) {
+            self.add_at(b, x, e, wt);
+        }
+    }
+
+    /// Adds a unit to bin `b` (which must be one of the row's).
+    #[inline]
+    pub fn add_at(&mut self, b: usize, x: f64, e: f64, wt: f64) {
+        self.s[b] += wt * e;
+        self.w[b] += wt;
+        self.xs[b] += wt * x;
+    }
+}
+
+impl PointSums {
+    /// Sums of `recordings` recordings from their rows (in recording
+    /// order; a recording without units may be given an empty row).
+    pub fn from_rows(rows: impl IntoIterator<Item = PointRow>, binning: &Binning) -> PointSums {
+        let nb = binning.len().max(1);
+        let mut out = PointSums {
+            nb,
+            s: Vec::new(),
+            w: Vec::new(),
+            xs: vec![0.0; nb],
+        };
+        for row in rows {
+            out.s.extend_from_slice(&row.s);
+            out.w.extend_from_slice(&row.w);
+            for (a, b) in out.xs.iter_mut().zip(&row.xs) {
+                *a += b;
+            }
+        }
+        out
+    }
+
+    /// Sums of units streamed recording by recording (`(recording, x, e,
+    /// w)`, recordings ascending in `0..recordings`).
+    pub fn of_units(
+        units: impl IntoIterator<Item = (usize, f64, f64, f64)>,
+        recordings: usize,
+        binning: &Binning,
+    ) -> PointSums {
+        let mut rows: Vec<PointRow> = (0..recordings).map(|_| PointRow::new(binning)).collect();
+        for (r, x, e, wt) in units {
+            rows[r].add(binning, x, e, wt);
+        }
+        PointSums::from_rows(rows, binning)
+    }
+
+    /// Bins (at least 1).
+    pub fn bins(&self) -> usize {
+        self.nb
+    }
+
+    /// Recordings summed.
+    pub fn recordings(&self) -> usize {
+        self.s.len() / self.nb
+    }
+
+    /// `(Σw·e, Σw)` per recording and bin, and Σw·x per bin.
+    pub fn parts(&self) -> (&[f64], &[f64], &[f64]) {
+        (&self.s, &self.w, &self.xs)
+    }
+}
+
 /// [`point_test`] on units produced one at a time (in the same order, the
 /// same outcome bit for bit): the test holds per recording and bin two
 /// sums, never the units.
@@ -325,19 +438,25 @@ pub fn point_test_stream(
     permutations: usize,
     seed: u64,
 ) -> TestOutcome {
-    let nb = binning.len().max(1);
-    // Per recording: Σw·e and Σw per bin, and the covariate sums.
-    let mut s = vec![0.0; recordings * nb];
-    let mut w = vec![0.0; recordings * nb];
-    let mut xs = vec![0.0; nb];
-    for (r, x, e, wt) in units {
-        let Some(b) = binning.of_number(x) else {
-            continue;
-        };
-        s[r * nb + b] += wt * e;
-        w[r * nb + b] += wt;
-        xs[b] += wt * x;
-    }
+    point_test_sums(
+        &PointSums::of_units(units, recordings, binning),
+        binning,
+        permutations,
+        seed,
+    )
+}
+
+/// [`point_test`] on the units' sums.
+pub fn point_test_sums(
+    sums: &PointSums,
+    binning: &Binning,
+    permutations: usize,
+    seed: u64,
+) -> TestOutcome {
+    let nb = sums.nb;
+    debug_assert_eq!(nb, binning.len().max(1), "sums of another binning");
+    let recordings = sums.recordings();
+    let (s, w, xs) = sums.parts();
     // Centre each recording on its own mean.
     let mut d = vec![0.0; recordings * nb];
     let mut used = 0;

@@ -198,7 +198,7 @@ pub use report::{
     ShapeParameter, ShapeTried, Step,
 };
 
-use attribution::{Binning, TestOutcome, holm, point_test_stream, scan_test};
+use attribution::{Binning, PointRow, PointSums, TestOutcome, holm, point_test_sums, scan_test};
 use data::Loaded;
 use evaluate::{Metrics, RecEval, SimOptions, evaluate};
 use scene::VoxelBox;
@@ -478,8 +478,9 @@ impl UnitCov<'_> {
 /// held; point-level ones (a residual per reference cell and per kept
 /// return of every recording, millions in a campaign, and the count units
 /// per laser, sector and range bin) are not: they are produced again from
-/// the evaluations, in the same order, by each test that reads them
-/// ([`point_units`]), so memory does not grow with them.
+/// the evaluations, in the same order, by each pass that reads them
+/// ([`point_units`]; one pass per observable feeds all its tests,
+/// [`batch_sums`]), so memory does not grow with them.
 struct Residuals {
     /// The observables with point-level residual units.
     point_level: BTreeSet<ExtensionObservable>,
@@ -553,6 +554,21 @@ fn point_units<'a>(
     evals: &'a [RecEval],
     obs: ExtensionObservable,
 ) -> Box<dyn Iterator<Item = PointUnit<'a>> + 'a> {
+    Box::new(
+        evals
+            .iter()
+            .enumerate()
+            .flat_map(move |(i, e)| recording_units(loaded, i, e, obs)),
+    )
+}
+
+/// [`point_units`] of one recording (`i`: its index into the evaluations).
+fn recording_units<'a>(
+    loaded: &'a Loaded,
+    i: usize,
+    e: &'a RecEval,
+    obs: ExtensionObservable,
+) -> Box<dyn Iterator<Item = PointUnit<'a>> + 'a> {
     let cov = move |c: u32| -> UnitCov<'a> {
         UnitCov::Point(
             &loaded.cells[c as usize]
@@ -561,30 +577,95 @@ fn point_units<'a>(
                 .cov,
         )
     };
-    let recs = evals.iter().enumerate();
+    let rec = &loaded.recs[e.rec];
     match obs {
-        ExtensionObservable::Survival => Box::new(recs.flat_map(move |(i, e)| {
-            let rec = &loaded.recs[e.rec];
+        ExtensionObservable::Survival => Box::new(
             rec.units
                 .iter()
                 .zip(e.survival_residuals(loaded, rec))
-                .map(move |(u, (r, w))| (i, cov(u.cell), r, w))
-        })),
-        ExtensionObservable::Range | ExtensionObservable::Intensity => {
-            Box::new(recs.flat_map(move |(i, e)| {
-                loaded.recs[e.rec]
-                    .kept
-                    .iter()
-                    .zip(e.kept_residuals(loaded, obs))
-                    .map(move |(k, r)| (i, cov(k.cell), r, 1.0))
-            }))
-        }
-        ExtensionObservable::Count => Box::new(recs.flat_map(move |(i, e)| {
-            e.count_bin_residuals(loaded, &loaded.recs[e.rec])
+                .map(move |(u, (r, w))| (i, cov(u.cell), r, w)),
+        ),
+        ExtensionObservable::Range | ExtensionObservable::Intensity => Box::new(
+            rec.kept
+                .iter()
+                .zip(e.kept_residuals(loaded, obs))
+                .map(move |(k, r)| (i, cov(k.cell), r, 1.0)),
+        ),
+        ExtensionObservable::Count => Box::new(
+            e.count_bin_residuals(loaded, rec)
                 .into_iter()
-                .map(move |u| (i, UnitCov::Count(u.cov), u.residual, u.weight))
-        })),
+                .map(move |u| (i, UnitCov::Count(u.cov), u.residual, u.weight)),
+        ),
     }
+}
+
+/// What one pass over an observable's point units accumulates for one
+/// test ([`batch_sums`]).
+struct Sink<'a> {
+    /// The covariate whose bins the units are summed in; `None`: one bin,
+    /// the recording's weighted mean (a scan-level test on point residuals).
+    by: Option<(&'a str, &'a Binning)>,
+    /// Removed from each unit's residual first (a re-test's profile), by
+    /// recording index and unit covariates.
+    offset: Option<&'a (dyn Fn(usize, &UnitCov) -> f64 + Sync)>,
+}
+
+/// The sums of every sink's test from one pass over `obs`'s point units
+/// (recordings in parallel, each recording's units in order): the same
+/// sums, bit for bit, as a pass per sink, at the cost of one. A pass
+/// computes each unit's residual (for survival a keep probability per
+/// reference cell), which is what the tests cost; with a dozen tests per
+/// observable and every significant pair re-tested, one pass per test was
+/// most of a diagnosis's attribution time.
+fn batch_sums(
+    loaded: &Loaded,
+    evals: &[RecEval],
+    obs: ExtensionObservable,
+    sinks: &[Sink],
+) -> Vec<PointSums> {
+    let one = Binning::Numeric { edges: vec![] };
+    fn binning_of<'b>(k: &Sink<'b>, one: &'b Binning) -> &'b Binning {
+        k.by.map_or(one, |b| b.1)
+    }
+    let binning = |k| binning_of(k, &one);
+    let rows: Vec<Vec<PointRow>> = evals
+        .par_iter()
+        .enumerate()
+        .map(|(i, e)| {
+            let mut rows: Vec<PointRow> = sinks.iter().map(|k| PointRow::new(binning(k))).collect();
+            for (r, pc, e, w) in recording_units(loaded, i, e, obs) {
+                for (k, row) in sinks.iter().zip(rows.iter_mut()) {
+                    let e = match k.offset {
+                        Some(off) => e - off(r, &pc),
+                        None => e,
+                    };
+                    match k.by {
+                        Some((cov, b)) => {
+                            if let Some(x) = pc.get(cov) {
+                                row.add(b, x, e, w);
+                            }
+                        }
+                        None => row.add_at(0, 0.0, e, w),
+                    }
+                }
+            }
+            rows
+        })
+        .collect();
+    let mut per_sink: Vec<Vec<PointRow>> = sinks
+        .iter()
+        .map(|_| Vec::with_capacity(rows.len()))
+        .collect();
+    for rec_rows in rows {
+        for (k, row) in rec_rows.into_iter().enumerate() {
+            per_sink[k].push(row);
+        }
+    }
+    per_sink
+        .into_iter()
+        .zip(sinks)
+        .map(|(rows, k)| PointSums::from_rows(rows, binning(k)))
+        .collect()
 }
 
 /// The seed of one randomised step: murk's one derivation
@@ -1073,55 +1154,92 @@ impl DiagnoseValidParams {
             tests: specs.len(),
             threshold: p.relevance.of(obs),
         };
+        // The point-level tests of survival, range and intensity: their
+        // bins (cut from the units' cells), then every covariate's sums from
+        // one pass over the observable's units.
+        let mut batched: BTreeMap<usize, (Binning, PointSums)> = BTreeMap::new();
+        for obs in [
+            ExtensionObservable::Survival,
+            ExtensionObservable::Range,
+            ExtensionObservable::Intensity,
+        ] {
+            let (true, Some(counts)) = (res.point_level.contains(&obs), res.cell_counts.get(&obs))
+            else {
+                continue;
+            };
+            let cut: Vec<(usize, Binning)> = specs
+                .iter()
+                .enumerate()
+                .filter(|(_, (o, _, point))| *o == obs && *point)
+                .filter_map(|(i, (_, cov, _))| {
+                    // The values of the units' cells, each as many times as
+                    // it has units.
+                    let values: Vec<(f64, u64)> = counts
+                        .iter()
+                        .enumerate()
+                        .filter(|(_, n)| **n > 0)
+                        .filter_map(|(c, n)| Some((loaded.cells[c].as_ref()?.cov.get(cov)?, *n)))
+                        .collect();
+                    let b = Binning::numeric_counted(&values, p.point_bins);
+                    (b.len() >= 2).then_some((i, b))
+                })
+                .collect();
+            let sinks: Vec<Sink> = cut
+                .iter()
+                .map(|(i, b)| Sink {
+                    by: Some((specs[*i].1.as_str(), b)),
+                    offset: None,
+                })
+                .collect();
+            let sums = batch_sums(loaded, evals, obs, &sinks);
+            for ((i, b), s) in cut.into_iter().zip(sums) {
+                batched.insert(i, (b, s));
+            }
+        }
         specs
             .par_iter()
-            .filter_map(|(obs, cov, point)| {
+            .enumerate()
+            .filter_map(|(i, (obs, cov, point))| {
                 let seed = seed_of(p.seed, Purpose::DiagnoseTest, &["test", obs.name(), cov]);
                 if *point {
                     if !res.point_level.contains(obs) {
                         return None;
                     }
-                    let binning = match res.cell_counts.get(obs) {
-                        // The values of the units' cells, each as many
-                        // times as it has units.
-                        Some(counts) => {
-                            let values: Vec<(f64, u64)> = counts
-                                .iter()
-                                .enumerate()
-                                .filter(|(_, n)| **n > 0)
-                                .filter_map(|(c, n)| {
-                                    Some((loaded.cells[c].as_ref()?.cov.get(cov)?, *n))
-                                })
-                                .collect();
-                            Binning::numeric_counted(&values, p.point_bins)
-                        }
+                    let (binning, outcome, detectable) = match batched.get(&i) {
+                        Some((binning, sums)) => (
+                            binning.clone(),
+                            point_test_sums(sums, binning, perms, seed),
+                            if p.detectable {
+                                power::point_detectable_sums(sums, perms, seed, decision(*obs))
+                            } else {
+                                power::Detectable::not_computed()
+                            },
+                        ),
+                        // Too few bins.
+                        None if res.cell_counts.contains_key(obs) => return None,
                         // Count units: a few per recording, cut directly.
                         None => {
                             let xs: Vec<f64> = point_units(loaded, evals, *obs)
                                 .filter_map(|u| u.1.get(cov))
                                 .collect();
-                            Binning::numeric(&xs, p.point_bins)
+                            let binning = Binning::numeric(&xs, p.point_bins);
+                            if binning.len() < 2 {
+                                return None;
+                            }
+                            let sums = PointSums::of_units(
+                                point_units(loaded, evals, *obs)
+                                    .filter_map(|(r, pc, e, w)| pc.get(cov).map(|x| (r, x, e, w))),
+                                nrec,
+                                &binning,
+                            );
+                            let outcome = point_test_sums(&sums, &binning, perms, seed);
+                            let detectable = if p.detectable {
+                                power::point_detectable_sums(&sums, perms, seed, decision(*obs))
+                            } else {
+                                power::Detectable::not_computed()
+                            };
+                            (binning, outcome, detectable)
                         }
-                    };
-                    if binning.len() < 2 {
-                        return None;
-                    }
-                    let units = || {
-                        point_units(loaded, evals, *obs)
-                            .filter_map(|(r, pc, e, w)| pc.get(cov).map(|x| (r, x, e, w)))
-                    };
-                    let outcome = point_test_stream(units(), nrec, &binning, perms, seed);
-                    let detectable = if p.detectable {
-                        power::point_detectable(
-                            units(),
-                            nrec,
-                            &binning,
-                            perms,
-                            seed,
-                            decision(*obs),
-                        )
-                    } else {
-                        power::Detectable::not_computed()
                     };
                     Some(Test {
                         observable: *obs,
@@ -1203,17 +1321,26 @@ impl DiagnoseValidParams {
             if sig.len() < 2 {
                 continue;
             }
-            let pairs: Vec<(usize, usize)> = sig
-                .iter()
-                .flat_map(|&a| sig.iter().filter(move |&&b| b != a).map(move |&b| (a, b)))
-                .collect();
-            let explained: BTreeMap<(usize, usize), bool> = pairs
+            // Per b (the profile removed), every other a re-tested in one
+            // pass over the units.
+            let explained: BTreeMap<(usize, usize), bool> = sig
                 .par_iter()
-                .map(|&(a, b)| {
-                    let o = self.retest(loaded, evals, res, &tests[a], &tests[b], perms);
-                    let keeps =
-                        (o.p_value * m).min(1.0) < p.alpha && o.strength >= p.relevance.of(obs);
-                    ((a, b), !keeps)
+                .flat_map_iter(|&b| {
+                    let others: Vec<&Test> = sig
+                        .iter()
+                        .filter(|&&a| a != b)
+                        .map(|&a| &tests[a])
+                        .collect();
+                    let outcomes = self.retest(loaded, evals, res, &others, &tests[b], perms);
+                    sig.iter()
+                        .filter(move |&&a| a != b)
+                        .zip(outcomes)
+                        .map(move |(&a, o)| {
+                            let keeps = (o.p_value * m).min(1.0) < p.alpha
+                                && o.strength >= p.relevance.of(obs);
+                            ((a, b), !keeps)
+                        })
+                        .collect::<Vec<_>>()
                 })
                 .collect();
             let prefer = |b: usize, a: usize| -> bool {
@@ -1243,85 +1370,104 @@ impl DiagnoseValidParams {
         }
     }
 
-    /// Test `a` again on the residuals left after removing `b`'s profile.
+    /// Tests each of `tests` (`a`, of `b`'s observable) again on the
+    /// residuals left after removing `b`'s profile; the point-level
+    /// residuals are read in one pass for all of them ([`batch_sums`]).
     fn retest(
         &self,
         loaded: &Loaded,
         evals: &[RecEval],
         res: &Residuals,
-        a: &Test,
+        tests: &[&Test],
         b: &Test,
         perms: usize,
-    ) -> TestOutcome {
+    ) -> Vec<TestOutcome> {
         let p = &self.0;
         let nrec = evals.len();
-        let seed = seed_of(
-            p.seed,
-            Purpose::DiagnoseTest,
-            &["retest", a.observable.name(), &a.covariate, &b.covariate],
-        );
-        let labels = b.binning.labels();
+        let seed = |a: &Test| {
+            seed_of(
+                p.seed,
+                Purpose::DiagnoseTest,
+                &["retest", a.observable.name(), &a.covariate, &b.covariate],
+            )
+        };
+        // b's profile level per bin of its binning (0 where it has none).
         let level: BTreeMap<&str, f64> = b
             .outcome
             .profile
             .iter()
             .map(|x| (x.label.as_str(), x.mean_residual))
             .collect();
-        let prof = |bin: Option<usize>| -> f64 {
-            bin.and_then(|k| labels.get(k))
-                .and_then(|l| level.get(l.as_str()))
-                .copied()
-                .unwrap_or(0.0)
-        };
+        let levels: Vec<f64> = b
+            .binning
+            .labels()
+            .iter()
+            .map(|l| level.get(l.as_str()).copied().unwrap_or(0.0))
+            .collect();
+        let prof =
+            |bin: Option<usize>| -> f64 { bin.and_then(|k| levels.get(k)).copied().unwrap_or(0.0) };
         let scan_of = |r: usize| &loaded.recs[evals[r].rec].scan;
-        let b_scan = |r: usize| prof(scan_of(r).get(&b.covariate).and_then(|v| b.binning.of(v)));
-        match res.point_level.contains(&a.observable) {
-            // A scan-level count test keeps the recording's own count
-            // residual: a point-level count profile is centred per
-            // recording, so removing it leaves that residual as it is.
-            true if a.point_level
-                || (b.point_level && a.observable != ExtensionObservable::Count) =>
-            {
-                // Point residuals with b removed.
-                let adj = point_units(loaded, evals, a.observable).map(|(r, pc, e, w)| {
-                    let off = if b.point_level {
-                        prof(pc.get(&b.covariate).and_then(|x| b.binning.of_number(x)))
-                    } else {
-                        b_scan(r)
-                    };
-                    (r, pc, e - off, w)
-                });
-                if a.point_level {
-                    let units =
-                        adj.filter_map(|(r, pc, e, w)| pc.get(&a.covariate).map(|x| (r, x, e, w)));
-                    point_test_stream(units, nrec, &a.binning, perms, seed)
-                } else {
-                    let mut s = vec![(0.0f64, 0.0f64); nrec];
-                    for (r, _, e, w) in adj {
-                        s[r].0 += e * w;
-                        s[r].1 += w;
-                    }
-                    let vals: Vec<(&CovariateValue, f64)> = (0..nrec)
-                        .filter(|&r| s[r].1 > 0.0)
-                        .filter_map(|r| Some((scan_of(r).get(&a.covariate)?, s[r].0 / s[r].1)))
-                        .collect();
-                    scan_test(&vals, &a.binning, perms, seed)
-                }
+        // b's level per recording, when b is scan-level.
+        let b_scan: Vec<f64> = (0..nrec)
+            .map(|r| prof(scan_of(r).get(&b.covariate).and_then(|v| b.binning.of(v))))
+            .collect();
+        let off = |r: usize, pc: &UnitCov| -> f64 {
+            if b.point_level {
+                prof(pc.get(&b.covariate).and_then(|x| b.binning.of_number(x)))
+            } else {
+                b_scan[r]
             }
-            _ => {
+        };
+        // Which tests read point residuals with b removed: a point-level a,
+        // or a scan-level a of a point-level b (a scan-level count test
+        // keeps the recording's own count residual: a point-level count
+        // profile is centred per recording, so removing it leaves that
+        // residual as it is).
+        let by_points = |a: &Test| {
+            res.point_level.contains(&a.observable)
+                && (a.point_level || (b.point_level && a.observable != ExtensionObservable::Count))
+        };
+        let sinks: Vec<Sink> = tests
+            .iter()
+            .filter(|a| by_points(a))
+            .map(|a| Sink {
+                by: a.point_level.then(|| (a.covariate.as_str(), &a.binning)),
+                offset: Some(&off),
+            })
+            .collect();
+        let mut sums = match tests.first() {
+            Some(a) if !sinks.is_empty() => batch_sums(loaded, evals, a.observable, &sinks),
+            _ => Vec::new(),
+        }
+        .into_iter();
+        tests
+            .iter()
+            .map(|a| {
+                if by_points(a) {
+                    let sums = sums.next().expect("a sink per such test");
+                    if a.point_level {
+                        return point_test_sums(&sums, &a.binning, perms, seed(a));
+                    }
+                    let (s, w, _) = sums.parts();
+                    let vals: Vec<(&CovariateValue, f64)> = (0..nrec)
+                        .filter(|&r| w[r] > 0.0)
+                        .filter_map(|r| Some((scan_of(r).get(&a.covariate)?, s[r] / w[r])))
+                        .collect();
+                    return scan_test(&vals, &a.binning, perms, seed(a));
+                }
                 // Both scan-level: recording residuals with b removed.
                 let scan = res.scans.get(&a.observable).cloned().unwrap_or_default();
                 let vals: Vec<(&CovariateValue, f64)> = (0..nrec)
                     .filter_map(|r| {
                         Some((
                             scan_of(r).get(&a.covariate)?,
-                            scan.get(r).copied()?? - b_scan(r),
+                            scan.get(r).copied()?? - b_scan[r],
                         ))
                     })
                     .collect();
-                scan_test(&vals, &a.binning, perms, seed)
-            }
-        }
+                scan_test(&vals, &a.binning, perms, seed(a))
+            })
+            .collect()
     }
 
     /// Bins of the extension term: the finding's own for point covariates;
@@ -1337,5 +1483,107 @@ impl DiagnoseValidParams {
             .collect();
         let b = Binning::scan(&vs, self.0.scan_bins);
         if b.len() >= 2 { b } else { t.binning.clone() }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A small generated fog campaign, loaded, with its table's held-in
+    /// evaluations (no simulation).
+    fn evaluated(seed: u64) -> (tempfile::TempDir, Loaded, Vec<RecEval>) {
+        use murk_fixtures::{Generator, GeneratorConfig, OutputOptions, PerClass, Preset};
+        let mut c = GeneratorConfig::preset(Preset::Small);
+        c.campaign.recordings = 12;
+        c.weather.mix = PerClass {
+            clear: 0.25,
+            fog: 0.75,
+            rain: 0.0,
+            snow: 0.0,
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("campaign");
+        Generator::new(c)
+            .unwrap()
+            .write_campaign(seed, &OutputOptions::new(&out))
+            .unwrap();
+        let campaign = Campaign::open(&out).unwrap();
+        let params = FitParams::default().check().unwrap();
+        let loaded = data::load(&campaign, murk_types::WeatherClass::Fog, &params).unwrap();
+        let table = params.fit_inputs(&loaded.inputs).unwrap().table().clone();
+        let all: Vec<usize> = (0..loaded.recs.len()).collect();
+        let evals = evaluate(&loaded, &table, &all, None, &params).unwrap();
+        (dir, loaded, evals)
+    }
+
+    /// One pass feeding many tests gives each test the sums a pass of its
+    /// own gives, bit for bit: binned by each point covariate, with a
+    /// profile removed, and as per-recording means (one bin).
+    #[test]
+    fn one_pass_gives_every_test_the_sums_of_its_own_pass() {
+        for seed in [1, 2] {
+            let (_dir, loaded, evals) = evaluated(seed);
+            let nrec = evals.len();
+            let off = |r: usize, pc: &UnitCov| -> f64 {
+                0.01 * r as f64 - pc.get("range").unwrap_or(0.0) / 1000.0
+            };
+            for obs in [
+                ExtensionObservable::Survival,
+                ExtensionObservable::Range,
+                ExtensionObservable::Intensity,
+            ] {
+                let binnings: Vec<(&str, Binning)> = POINT_COVARIATES
+                    .iter()
+                    .map(|&c| {
+                        let xs: Vec<f64> = point_units(&loaded, &evals, obs)
+                            .filter_map(|u| u.1.get(c))
+                            .collect();
+                        (c, Binning::numeric(&xs, 8))
+                    })
+                    .collect();
+                let mut sinks: Vec<Sink> = binnings
+                    .iter()
+                    .map(|(c, b)| Sink {
+                        by: Some((c, b)),
+                        offset: None,
+                    })
+                    .collect();
+                sinks.extend(binnings.iter().map(|(c, b)| Sink {
+                    by: Some((c, b)),
+                    offset: Some(&off),
+                }));
+                sinks.push(Sink {
+                    by: None,
+                    offset: Some(&off),
+                });
+                let batch = batch_sums(&loaded, &evals, obs, &sinks);
+                assert_eq!(batch.len(), sinks.len());
+                for (k, sink) in sinks.iter().enumerate() {
+                    let one = Binning::Numeric { edges: vec![] };
+                    let (cov, binning) = sink.by.unwrap_or(("", &one));
+                    let own = PointSums::of_units(
+                        point_units(&loaded, &evals, obs).filter_map(|(r, pc, e, w)| {
+                            let e = match sink.offset {
+                                Some(f) => e - f(r, &pc),
+                                None => e,
+                            };
+                            match sink.by {
+                                Some(_) => pc.get(cov).map(|x| (r, x, e, w)),
+                                None => Some((r, 0.0, e, w)),
+                            }
+                        }),
+                        nrec,
+                        binning,
+                    );
+                    assert_eq!(batch[k], own, "seed {seed} {obs:?} sink {k} ({cov})");
+                    let (_, w, _) = own.parts();
+                    assert!(
+                        w.iter().sum::<f64>() > 0.0,
+                        "seed {seed} {obs:?} sink {k}: no units"
+                    );
+                }
+            }
+        }
     }
 }

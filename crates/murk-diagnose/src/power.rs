@@ -55,7 +55,7 @@ use rand::rngs::ChaCha8Rng;
 use rand::seq::SliceRandom;
 use rand::{RngExt, SeedableRng};
 
-use crate::attribution::Binning;
+use crate::attribution::{Binning, PointSums};
 use crate::report::Report;
 
 /// Share of simulated draws a detectable effect is found in.
@@ -150,16 +150,25 @@ pub fn point_detectable(
     seed: u64,
     decision: Decision,
 ) -> Detectable {
-    let nb = binning.len().max(1);
-    let mut s = vec![0.0; recordings * nb];
-    let mut w = vec![0.0; recordings * nb];
-    for (r, x, e, wt) in units {
-        let Some(b) = binning.of_number(x) else {
-            continue;
-        };
-        s[r * nb + b] += wt * e;
-        w[r * nb + b] += wt;
-    }
+    point_detectable_sums(
+        &PointSums::of_units(units, recordings, binning),
+        permutations,
+        seed,
+        decision,
+    )
+}
+
+/// [`point_detectable`] on the units' sums (the same sums
+/// [`crate::attribution::point_test_sums`] reads).
+pub fn point_detectable_sums(
+    sums: &PointSums,
+    permutations: usize,
+    seed: u64,
+    decision: Decision,
+) -> Detectable {
+    let recordings = sums.recordings();
+    let (s, w, _) = sums.parts();
+    let nb = sums.bins();
     let mut d = vec![0.0; recordings * nb];
     let mut informative = 0usize;
     for r in 0..recordings {
