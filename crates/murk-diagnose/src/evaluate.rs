@@ -496,45 +496,73 @@ pub struct Metrics {
 impl Metrics {
     /// Aggregates `evals` of `loaded`'s recordings.
     pub fn of(loaded: &Loaded, evals: &[RecEval]) -> Metrics {
-        let mut ll = 0.0;
-        let mut trials = 0.0;
-        let mut ncr = 0.0;
+        // Per recording in parallel (its keep probabilities and residuals
+        // are computed again from its summaries, the cost of a metric),
+        // then summed in recording order: the same bits on any thread
+        // count.
+        struct Part {
+            ll: f64,
+            tr: f64,
+            ncr: Option<f64>,
+            kept: [f64; 5],
+            count: Option<f64>,
+            lasers: Option<f64>,
+            sectors: Option<f64>,
+            scene: Option<SceneMetrics>,
+        }
+        let parts: Vec<Part> = evals
+            .par_iter()
+            .map(|e| {
+                let rec = &loaded.recs[e.rec];
+                let (mut ll, mut pk, mut ok, mut tr) = (0.0, 0.0, 0.0, 0.0);
+                for (u, p) in rec.units.iter().zip(e.p(loaded)) {
+                    let p = p.clamp(P_FLOOR, 1.0 - P_FLOOR);
+                    let (k, n) = (u.kept as f64, u.trials as f64);
+                    ll -= k * p.ln() + (n - k) * (1.0 - p).ln();
+                    pk += p * n;
+                    ok += k;
+                    tr += n;
+                }
+                let mut kept = [0.0f64; 5];
+                let (range, intensity) = (e.range_residuals(loaded), e.intensity_residuals(loaded));
+                for (&r, &i) in range.iter().zip(&intensity) {
+                    kept[0] += r;
+                    kept[1] += r * r;
+                    kept[2] += i;
+                    kept[3] += i * i;
+                    kept[4] += 1.0;
+                }
+                let units = e.count_bin_residuals(loaded, rec);
+                Part {
+                    ll,
+                    tr,
+                    ncr: (tr > 0.0).then(|| (pk - ok).abs() / tr),
+                    kept,
+                    count: e.count_residual(rec).map(f64::abs),
+                    lasers: count_bin_loss(&units, "ring"),
+                    sectors: count_bin_loss(&units, "azimuth"),
+                    scene: e.scene,
+                }
+            })
+            .collect();
+        let (mut ll, mut trials, mut ncr) = (0.0, 0.0, 0.0);
         let (mut rs, mut rs2, mut is, mut is2, mut nk) = (0.0f64, 0.0f64, 0.0f64, 0.0f64, 0.0f64);
         let mut count = Vec::new();
         let (mut count_lasers, mut count_sectors) = (Vec::new(), Vec::new());
         let mut scenes = Vec::new();
-        for e in evals {
-            let rec = &loaded.recs[e.rec];
-            let (mut pk, mut ok, mut tr) = (0.0, 0.0, 0.0);
-            for (u, p) in rec.units.iter().zip(e.p(loaded)) {
-                let p = p.clamp(P_FLOOR, 1.0 - P_FLOOR);
-                let (k, n) = (u.kept as f64, u.trials as f64);
-                ll -= k * p.ln() + (n - k) * (1.0 - p).ln();
-                pk += p * n;
-                ok += k;
-                tr += n;
-            }
-            trials += tr;
-            if tr > 0.0 {
-                ncr += (pk - ok).abs() / tr;
-            }
-            let (range, intensity) = (e.range_residuals(loaded), e.intensity_residuals(loaded));
-            for (&r, &i) in range.iter().zip(&intensity) {
-                rs += r;
-                rs2 += r * r;
-                is += i;
-                is2 += i * i;
-                nk += 1.0;
-            }
-            if let Some(c) = e.count_residual(rec) {
-                count.push(c.abs());
-            }
-            let units = e.count_bin_residuals(loaded, rec);
-            count_lasers.extend(count_bin_loss(&units, "ring"));
-            count_sectors.extend(count_bin_loss(&units, "azimuth"));
-            if let Some(s) = e.scene {
-                scenes.push(s);
-            }
+        for part in parts {
+            ll += part.ll;
+            trials += part.tr;
+            ncr += part.ncr.unwrap_or(0.0);
+            rs += part.kept[0];
+            rs2 += part.kept[1];
+            is += part.kept[2];
+            is2 += part.kept[3];
+            nk += part.kept[4];
+            count.extend(part.count);
+            count_lasers.extend(part.lasers);
+            count_sectors.extend(part.sectors);
+            scenes.extend(part.scene);
         }
         let n = evals.len().max(1) as f64;
         let mean = |v: Vec<f64>| (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64);

@@ -49,6 +49,7 @@ use crate::{
     Baseline, DiagnoseError, DiagnoseValidParams, Folds, Test, extend, rank, relative_gain, seed_of,
 };
 use murk_fit::FitValidParams;
+use rayon::prelude::*;
 
 /// Candidates of one observable fitted and compared per step.
 pub const CANDIDATES_PER_STEP: usize = 3;
@@ -147,6 +148,21 @@ pub(crate) struct Stagewise {
     pub table: CoefficientTable,
 }
 
+/// What the candidates of one round share (the model is the same for all
+/// of them): the current model's held-out metrics, and the reference of a
+/// survival candidate's paired test — each fold's model with a constant
+/// factor on the vanishing distance and the edge re-fitted, evaluated held
+/// out, with each recording's loss. Computed by the first candidate that
+/// needs them.
+#[derive(Default)]
+struct RoundCache {
+    /// `Metrics::of` the current evaluations.
+    before: Option<Metrics>,
+    /// The survival reference's held-out loss per recording (by
+    /// recording).
+    null: Option<Vec<Option<f64>>>,
+}
+
 type Key = (ExtensionObservable, String);
 
 fn key(f: &Finding) -> Key {
@@ -238,11 +254,13 @@ impl DiagnoseValidParams {
                 }
             }
             let mut took: Option<(usize, Candidate)> = None;
+            let mut cache = RoundCache::default();
             for (_, group) in &groups {
                 for &i in group.iter().take(CANDIDATES_PER_STEP) {
                     let t = &tests[i];
-                    let c =
-                        self.candidate(loaded, folds, &tables, &evals, t, sim, fit_params, round)?;
+                    let c = self.candidate(
+                        loaded, folds, &tables, &evals, t, sim, fit_params, round, &mut cache,
+                    )?;
                     let rel = c.gain.as_ref().map(|g| g.relative);
                     let passes = c.p_value < p.alpha && rel.is_some_and(|g| g > 0.0);
                     if passes {
@@ -368,6 +386,7 @@ impl DiagnoseValidParams {
         sim: &SimOptions,
         fit_params: &FitValidParams,
         round: usize,
+        cache: &mut RoundCache,
     ) -> Result<Candidate, DiagnoseError> {
         let p = &self.0;
         // Counts need simulated near-range returns; the other observables
@@ -402,7 +421,6 @@ impl DiagnoseValidParams {
         // add something beyond that re-fit: its paired test is against the
         // same fit with one bin (a constant factor and the re-fitted edge).
         let survival = t.observable == ExtensionObservable::Survival;
-        let mut null_evals = Vec::new();
         for (f, table) in tables.iter().enumerate().take(folds.k) {
             let fit_set = folds.fit_set(f);
             let in_sample = evaluate(loaded, table, &fit_set, with_sim, fit_params)?;
@@ -444,7 +462,11 @@ impl DiagnoseValidParams {
                 tr.tables.push(ext);
                 tr.term = Some(term);
             }
-            if survival {
+        }
+        if survival && cache.null.is_none() {
+            let mut null_evals = Vec::new();
+            for (f, table) in tables.iter().enumerate().take(folds.k) {
+                let in_sample = evaluate(loaded, table, &folds.fit_set(f), None, fit_params)?;
                 // One bin along the recording's MOR, which every recording
                 // has: a constant factor.
                 let one = extend::fit_term_with_edge(
@@ -466,6 +488,12 @@ impl DiagnoseValidParams {
                     fit_params,
                 )?);
             }
+            null_evals.sort_by_key(|e| e.rec);
+            let losses = null_evals
+                .par_iter()
+                .map(|e| recording_loss(loaded, e, ExtensionObservable::Survival))
+                .collect();
+            cache.null = Some(losses);
         }
         let obs = t.observable;
         tried.retain(|tr| tr.ok);
@@ -480,7 +508,7 @@ impl DiagnoseValidParams {
             .iter()
             .map(|tr| {
                 tr.evals
-                    .iter()
+                    .par_iter()
                     .map(|e| recording_loss_of(loaded, e, obs, &t.covariate))
                     .collect()
             })
@@ -544,17 +572,23 @@ impl DiagnoseValidParams {
             ..
         } = tried.swap_remove(chosen);
         let edge = last.as_ref().and_then(|t| t.edge);
-        null_evals.sort_by_key(|e| e.rec);
-        let reference = if survival { &null_evals } else { evals };
-        let d: Vec<f64> = reference
+        // Per recording: the reference's loss less the chosen shape's.
+        let after = &losses[chosen];
+        let own: Vec<Option<f64>>;
+        let before: &[Option<f64>] = match &cache.null {
+            Some(losses) if survival => losses,
+            _ => {
+                own = evals
+                    .par_iter()
+                    .map(|e| recording_loss_of(loaded, e, obs, &t.covariate))
+                    .collect();
+                &own
+            }
+        };
+        let d: Vec<f64> = before
             .iter()
-            .zip(&new_evals)
-            .filter_map(|(a, b)| {
-                Some(
-                    recording_loss_of(loaded, a, obs, &t.covariate)?
-                        - recording_loss_of(loaded, b, obs, &t.covariate)?,
-                )
-            })
+            .zip(after)
+            .filter_map(|(a, b)| Some((*a)? - (*b)?))
             .collect();
         let seed = seed_of(
             p.seed,
@@ -562,7 +596,10 @@ impl DiagnoseValidParams {
             &["paired", obs.name(), &t.covariate, &round.to_string()],
         );
         let p_value = paired_gain_test(&d, p.permutations, seed);
-        let (metric, before) = Metrics::of(loaded, evals).of_test(obs, &t.covariate);
+        let (metric, before) = cache
+            .before
+            .get_or_insert_with(|| Metrics::of(loaded, evals))
+            .of_test(obs, &t.covariate);
         let (_, after) = Metrics::of(loaded, &new_evals).of_test(obs, &t.covariate);
         Ok(Candidate {
             tables: new_tables,
