@@ -319,7 +319,7 @@ pub fn point_test(
 /// sums Σw·e and Σw, and per bin Σw·x (for the profile's centres).
 ///
 /// The sums are all a test keeps, so one pass over an observable's units
-/// can fill the sums of every covariate's test at once ([`PointSums::row`]
+/// can fill the sums of every covariate's test at once (a [`PointRow`]
 /// per recording, in parallel), instead of a pass per test: a pass computes
 /// every unit's residual (a keep probability per reference cell), which is
 /// what a diagnosis spends its attribution time on. Σw·x is summed per

@@ -599,6 +599,10 @@ fn recording_units<'a>(
     }
 }
 
+/// What a re-test removes from a unit's residual: a function of the
+/// recording's index and the unit's covariates.
+type Offset<'a> = dyn Fn(usize, &UnitCov) -> f64 + Sync + 'a;
+
 /// What one pass over an observable's point units accumulates for one
 /// test ([`batch_sums`]).
 struct Sink<'a> {
@@ -607,7 +611,7 @@ struct Sink<'a> {
     by: Option<(&'a str, &'a Binning)>,
     /// Removed from each unit's residual first (a re-test's profile), by
     /// recording index and unit covariates.
-    offset: Option<&'a (dyn Fn(usize, &UnitCov) -> f64 + Sync)>,
+    offset: Option<&'a Offset<'a>>,
 }
 
 /// The sums of every sink's test from one pass over `obs`'s point units
@@ -1431,7 +1435,7 @@ impl DiagnoseValidParams {
             .iter()
             .filter(|a| by_points(a))
             .map(|a| Sink {
-                by: a.point_level.then(|| (a.covariate.as_str(), &a.binning)),
+                by: a.point_level.then_some((a.covariate.as_str(), &a.binning)),
                 offset: Some(&off),
             })
             .collect();
