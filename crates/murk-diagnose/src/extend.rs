@@ -1239,41 +1239,7 @@ mod tests {
     /// A generated fog campaign whose lower beams see less far (a factor
     /// 0.8 on the vanishing distance below −10° elevation, against 1 above).
     fn hidden_survival_campaign(seed: u64) -> (tempfile::TempDir, Loaded) {
-        use murk_fixtures::{
-            EffectFunction, EffectSpec, Generator, GeneratorConfig, Observable, OutputOptions,
-            PerClass, Preset,
-        };
-        let mut c = GeneratorConfig::preset(Preset::Small);
-        c.campaign.recordings = 24;
-        c.weather.mix = PerClass {
-            clear: 0.25,
-            fog: 0.75,
-            rain: 0.0,
-            snow: 0.0,
-        };
-        c.effects = vec![EffectSpec {
-            name: "lower beams see less far".into(),
-            observable: Observable::Survival,
-            survival_mode: None,
-            covariate: "elevation".into(),
-            weathers: vec![murk_types::WeatherClass::Fog],
-            function: EffectFunction::Step {
-                threshold: -10.0,
-                below: 0.8,
-                above: 1.0,
-            },
-            returns: None,
-        }];
-        let dir = tempfile::tempdir().unwrap();
-        let out = dir.path().join("campaign");
-        Generator::new(c)
-            .unwrap()
-            .write_campaign(seed, &OutputOptions::new(&out))
-            .unwrap();
-        let campaign = murk_campaign::Campaign::open(&out).unwrap();
-        let params = murk_fit::FitParams::default().check().unwrap();
-        let loaded = crate::data::load(&campaign, murk_types::WeatherClass::Fog, &params).unwrap();
-        (dir, loaded)
+        crate::test_support::fog_campaign(24, seed, true)
     }
 
     #[test]

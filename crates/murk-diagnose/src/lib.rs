@@ -178,6 +178,8 @@ pub mod power;
 mod report;
 pub mod scene;
 pub mod stagewise;
+#[cfg(test)]
+mod test_support;
 
 use std::collections::{BTreeMap, BTreeSet};
 
@@ -1497,24 +1499,8 @@ mod tests {
     /// A small generated fog campaign, loaded, with its table's held-in
     /// evaluations (no simulation).
     fn evaluated(seed: u64) -> (tempfile::TempDir, Loaded, Vec<RecEval>) {
-        use murk_fixtures::{Generator, GeneratorConfig, OutputOptions, PerClass, Preset};
-        let mut c = GeneratorConfig::preset(Preset::Small);
-        c.campaign.recordings = 12;
-        c.weather.mix = PerClass {
-            clear: 0.25,
-            fog: 0.75,
-            rain: 0.0,
-            snow: 0.0,
-        };
-        let dir = tempfile::tempdir().unwrap();
-        let out = dir.path().join("campaign");
-        Generator::new(c)
-            .unwrap()
-            .write_campaign(seed, &OutputOptions::new(&out))
-            .unwrap();
-        let campaign = Campaign::open(&out).unwrap();
+        let (dir, loaded) = test_support::fog_campaign(12, seed, false);
         let params = FitParams::default().check().unwrap();
-        let loaded = data::load(&campaign, murk_types::WeatherClass::Fog, &params).unwrap();
         let table = params.fit_inputs(&loaded.inputs).unwrap().table().clone();
         let all: Vec<usize> = (0..loaded.recs.len()).collect();
         let evals = evaluate(&loaded, &table, &all, None, &params).unwrap();
