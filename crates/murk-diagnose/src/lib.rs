@@ -1211,16 +1211,9 @@ impl DiagnoseValidParams {
                     if !res.point_level.contains(obs) {
                         return None;
                     }
-                    let (binning, outcome, detectable) = match batched.get(&i) {
-                        Some((binning, sums)) => (
-                            binning.clone(),
-                            point_test_sums(sums, binning, perms, seed),
-                            if p.detectable {
-                                power::point_detectable_sums(sums, perms, seed, decision(*obs))
-                            } else {
-                                power::Detectable::not_computed()
-                            },
-                        ),
+                    let counted;
+                    let (binning, sums) = match batched.get(&i) {
+                        Some((binning, sums)) => (binning, sums),
                         // Too few bins.
                         None if res.cell_counts.contains_key(obs) => return None,
                         // Count units: a few per recording, cut directly.
@@ -1238,15 +1231,17 @@ impl DiagnoseValidParams {
                                 nrec,
                                 &binning,
                             );
-                            let outcome = point_test_sums(&sums, &binning, perms, seed);
-                            let detectable = if p.detectable {
-                                power::point_detectable_sums(&sums, perms, seed, decision(*obs))
-                            } else {
-                                power::Detectable::not_computed()
-                            };
-                            (binning, outcome, detectable)
+                            counted = (binning, sums);
+                            (&counted.0, &counted.1)
                         }
                     };
+                    let outcome = point_test_sums(sums, binning, perms, seed);
+                    let detectable = if p.detectable {
+                        power::point_detectable_sums(sums, perms, seed, decision(*obs))
+                    } else {
+                        power::Detectable::not_computed()
+                    };
+                    let binning = binning.clone();
                     Some(Test {
                         observable: *obs,
                         covariate: cov.clone(),
@@ -1441,9 +1436,10 @@ impl DiagnoseValidParams {
                 offset: Some(&off),
             })
             .collect();
-        let mut sums = match tests.first() {
-            Some(a) if !sinks.is_empty() => batch_sums(loaded, evals, a.observable, &sinks),
-            _ => Vec::new(),
+        let mut sums = if sinks.is_empty() {
+            Vec::new()
+        } else {
+            batch_sums(loaded, evals, b.observable, &sinks)
         }
         .into_iter();
         tests
