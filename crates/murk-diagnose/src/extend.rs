@@ -413,11 +413,15 @@ fn fit_bins(
     })
 }
 
-/// One survival unit: a reference cell of one recording. Compact (24
-/// bytes; a fit set has tens of millions at a thousand recordings of
-/// HDL-64 size): the cell's range and reflectivity are looked up from its
-/// cell, the MOR from its recording's applier, the covariate's value and
-/// bin from [`ByUnit`] tables.
+/// One survival unit: a reference cell of one recording (40 bytes; a fit
+/// set holds at most about [`SURVIVAL_FIT_UNITS`]). The cell's range and
+/// reflectivity are copied in, because every likelihood evaluation reads
+/// them: looked up from the reference cells (72 bytes each, a grid of
+/// hundreds of thousands at HDL-64 size, visited sparsely once thinned)
+/// they were a cache miss per unit, the largest single cost of a term fit
+/// (measured: 84 % of the likelihood's own time). The MOR comes from its
+/// recording's applier, the covariate's value and bin from [`ByUnit`]
+/// tables.
 #[derive(Debug, Clone, Copy)]
 struct Item {
     /// Index of its recording's applier.
@@ -430,6 +434,10 @@ struct Item {
     trials: u32,
     /// Factor of the terms the table already has.
     base: f64,
+    /// The reference cell's range, metres.
+    range: f64,
+    /// The reference cell's reflectivity.
+    reflectivity: f64,
 }
 
 /// A value of a survival unit that depends on its cell alone (a point
@@ -463,8 +471,7 @@ impl<T: Copy> ByUnit<T> {
 /// The fit set's survival units under a table (thinned to about
 /// [`SURVIVAL_FIT_UNITS`]), for likelihood fits of a factor on the
 /// vanishing distance.
-struct SurvivalData<'a> {
-    loaded: &'a Loaded,
+struct SurvivalData {
     appliers: Vec<murk_infer::Applier>,
     /// The MOR of each applier's recording.
     mors: Vec<f64>,
@@ -478,17 +485,17 @@ struct SurvivalData<'a> {
     pi0: f64,
 }
 
-impl<'a> SurvivalData<'a> {
+impl SurvivalData {
     /// Units of `evals` (those the binning places, when one is given),
     /// thinned to about `cap` when there are more ([`keeps_unit`]).
     fn new(
-        loaded: &'a Loaded,
+        loaded: &Loaded,
         table: &CoefficientTable,
         evals: &[RecEval],
         covariate: &str,
         binning: Option<&Binning>,
         cap: usize,
-    ) -> Result<SurvivalData<'a>, DiagnoseError> {
+    ) -> Result<SurvivalData, DiagnoseError> {
         let cell = |c: u32| loaded.cells[c as usize].expect("reference cell");
         let mut appliers = Vec::with_capacity(evals.len());
         let mut mors = Vec::with_capacity(evals.len());
@@ -548,6 +555,8 @@ impl<'a> SurvivalData<'a> {
                     kept: u.kept,
                     trials: u.trials,
                     base,
+                    range: c.cov.range,
+                    reflectivity: c.cov.reflectivity,
                 };
                 xs.set(&it, x);
                 bins.set(&it, bin as u32);
@@ -561,7 +570,6 @@ impl<'a> SurvivalData<'a> {
             .and_then(|w| w.survival.as_ref())
             .map_or((0.0, 0.0), |s| (s.dropout, s.residual));
         Ok(SurvivalData {
-            loaded,
             appliers,
             mors,
             items,
@@ -578,11 +586,7 @@ impl<'a> SurvivalData<'a> {
     /// edge's dropout and residual swapped for e's.
     fn prob(&self, it: &Item, f: f64, e: &EdgeRefit) -> f64 {
         let ap = &self.appliers[it.applier as usize];
-        let cov = &self.loaded.cells[it.cell as usize]
-            .as_ref()
-            .expect("reference cell")
-            .cov;
-        let (ir, rho) = (cov.range, cov.reflectivity);
+        let (ir, rho) = (it.range, it.reflectivity);
         let f = it.base * f;
         let m = e.width_factor;
         let r = if m == 1.0 {
