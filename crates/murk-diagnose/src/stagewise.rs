@@ -421,12 +421,17 @@ impl DiagnoseValidParams {
         // add something beyond that re-fit: its paired test is against the
         // same fit with one bin (a constant factor and the re-fitted edge).
         let survival = t.observable == ExtensionObservable::Survival;
+        // The round's survival reference, when no candidate has made it yet
+        // (from the same in-sample evaluations as the shapes: a survival
+        // candidate evaluates without simulations).
+        let make_null = survival && cache.null.is_none();
+        let mut null_evals = Vec::new();
         for (f, table) in tables.iter().enumerate().take(folds.k) {
             let fit_set = folds.fit_set(f);
             let in_sample = evaluate(loaded, table, &fit_set, with_sim, fit_params)?;
             let binning = self.extension_binning(loaded, &fit_set, t);
             bins = binning.len();
-            let mut cache = extend::ShapeCache::default();
+            let mut shapes = extend::ShapeCache::default();
             for tr in tried.iter_mut().filter(|tr| tr.ok) {
                 let Some(term) = extend::fit_shaped(
                     loaded,
@@ -439,7 +444,7 @@ impl DiagnoseValidParams {
                     true,
                     0,
                     0,
-                    &mut cache,
+                    &mut shapes,
                 )?
                 else {
                     tr.ok = false;
@@ -462,11 +467,7 @@ impl DiagnoseValidParams {
                 tr.tables.push(ext);
                 tr.term = Some(term);
             }
-        }
-        if survival && cache.null.is_none() {
-            let mut null_evals = Vec::new();
-            for (f, table) in tables.iter().enumerate().take(folds.k) {
-                let in_sample = evaluate(loaded, table, &folds.fit_set(f), None, fit_params)?;
+            if make_null {
                 // One bin along the recording's MOR, which every recording
                 // has: a constant factor.
                 let one = extend::fit_term_with_edge(
@@ -488,6 +489,8 @@ impl DiagnoseValidParams {
                     fit_params,
                 )?);
             }
+        }
+        if make_null {
             null_evals.sort_by_key(|e| e.rec);
             let losses = null_evals
                 .par_iter()
