@@ -15,9 +15,10 @@
 //!    by the product of the intensity terms (stored back in the input's
 //!    scale);
 //! 4. **count**: the expected ghost and ring counts are multiplied by the
-//!    product of the scan-level count terms; the point-level ones (along
-//!    `ring`, `elevation`, `azimuth`) choose the rays the returns fall on
-//!    (`near`, [`murk_types::RayDensity`]).
+//!    product of the scan-level count terms; the point-level ones choose
+//!    the rays the returns fall on (along `ring`, `elevation`, `azimuth`)
+//!    and reshape their distance law (along their own `range`), scaling
+//!    the counts by their means (`near`, [`murk_types::RayDensity`]).
 //!
 //! Draws are seeded per fixed-size chunk by (seed, scan key), so outputs do
 //! not depend on the thread count.

@@ -166,6 +166,12 @@ impl TruncNormal {
     /// One draw.
     pub(crate) fn sample(&self, rng: &mut ChaCha8Rng) -> f64 {
         let u: f64 = rng.random();
+        self.at(u)
+    }
+
+    /// The value at probability fraction `t` in `[0, 1]` of the truncated
+    /// mass (the quantile; [`TruncNormal::sample`] at a uniform `t`).
+    pub(crate) fn at(&self, u: f64) -> f64 {
         let z = if self.pb > self.pa {
             norm_quantile(self.pa + u * (self.pb - self.pa)).clamp(self.a, self.b)
         } else {

@@ -333,6 +333,122 @@ fn count_terms_along_the_beams_place_ghosts_by_their_density() {
     assert!(out.len() > 16);
 }
 
+/// `∫ₐᵇ exp(−((x − μ)/σ)²/2) dx` by Simpson's rule (2,000 intervals): the
+/// test's own integral, independent of the sampler's Φ and quantile.
+fn gauss_mass(mean: f64, std: f64, a: f64, b: f64) -> f64 {
+    let n = 2000;
+    let h = (b - a) / n as f64;
+    let f = |x: f64| (-0.5 * ((x - mean) / std).powi(2)).exp();
+    let mut s = f(a) + f(b);
+    for i in 1..n {
+        s += f(a + i as f64 * h) * if i % 2 == 1 { 4.0 } else { 2.0 };
+    }
+    s * h / 3.0
+}
+
+#[test]
+fn count_terms_along_range_reshape_the_distance_law_and_scale_the_count() {
+    // Hand-built known answer (the seed-004 per-echo range law): near-range
+    // returns three times as dense below 5 m as the table's law says and
+    // half as dense beyond. The ghost law N(5.011, 1.753²) on [3, 10] m has
+    // mass P below 5 m, so its count scales by 3P + 0.5(1 − P) and a share
+    // 3P / (3P + 0.5(1 − P)) of the ghosts falls below 5 m; the ring law
+    // (0.5–3 m) lies below 5 m: its count triples and its shape stays.
+    let mut t = common::seed_table();
+    t.weathers.get_mut(&WeatherClass::Fog).unwrap().extensions = vec![term(
+        ExtensionObservable::Count,
+        "range",
+        vec![5.0],
+        vec![3.0, 0.5],
+    )];
+    t.validate().unwrap();
+    let p = gauss_mass(5.011, 1.753, 3.0, 5.0) / gauss_mass(5.011, 1.753, 3.0, 10.0);
+    let ghost_factor = 3.0 * p + 0.5 * (1.0 - p);
+    let share_below = 3.0 * p / ghost_factor;
+    let spec = murk_types::LidarSpec::vlp16();
+    let mut scan = PointCloud::with_capacity(16);
+    for ring in 0..16u16 {
+        let el = spec.elevation_deg[ring as usize].to_radians();
+        scan.push(
+            (300.0 * el.cos()) as f32,
+            0.0,
+            (300.0 * el.sin()) as f32,
+            50.0,
+            ring,
+        );
+    }
+    let ap = ApplyParams::new(WeatherClass::Fog, Severity::Mor(60.0))
+        .near_range(true)
+        .lidar(spec.clone())
+        .build(&t)
+        .unwrap();
+    let (mut ghosts, mut below, mut rings, mut ring_sum) = (0usize, 0usize, 0usize, 0.0f64);
+    let scans = 300;
+    for k in 0..scans {
+        let (out, summary) = ap.apply(&scan, &format!("s{k}")).unwrap();
+        let g = summary.ghost.as_ref().unwrap().expected;
+        let r = summary.ring.as_ref().unwrap().expected;
+        // One of the 1,024 cells straddles 5 m: at most 2.5/1,024 off.
+        assert!((g - 41.0 * ghost_factor).abs() < 41.0 * 2.5e-3, "ghost {g}");
+        assert!((r - 36.0).abs() < 1e-9, "ring {r}");
+        for i in 0..out.len() {
+            let (x, y, z) = (out.x[i] as f64, out.y[i] as f64, out.z[i] as f64);
+            let d = (x * x + y * y + z * z).sqrt();
+            if d < 3.0 {
+                rings += 1;
+                ring_sum += d;
+            } else if d <= 10.0 {
+                ghosts += 1;
+                below += usize::from(d < 5.0);
+            }
+        }
+    }
+    // ~19 000 ghosts: the share's standard error is about 0.003.
+    let per_scan = ghosts as f64 / scans as f64;
+    assert!(
+        (per_scan / (41.0 * ghost_factor) - 1.0).abs() < 0.03,
+        "{per_scan} ghosts per scan, expected {}",
+        41.0 * ghost_factor
+    );
+    let share = below as f64 / ghosts as f64;
+    assert!(
+        (share - share_below).abs() < 0.012,
+        "share below 5 m {share}, truth {share_below}"
+    );
+    // The ring law is unchanged in shape: its mean stays that of
+    // N(1.308, 0.172²) (the truncation at 0.5 and 3 m is 4.7 and 9.8
+    // standard deviations away).
+    assert!((rings as f64 / scans as f64 / 36.0 - 1.0).abs() < 0.03);
+    assert!((ring_sum / rings as f64 - 1.308).abs() < 0.005);
+    // A term that is 0 over the whole law places none of its kind.
+    let mut none = t.clone();
+    none.weathers
+        .get_mut(&WeatherClass::Fog)
+        .unwrap()
+        .extensions = vec![term(
+        ExtensionObservable::Count,
+        "range",
+        vec![3.0],
+        vec![1.0, 0.0],
+    )];
+    let ap = ApplyParams::new(WeatherClass::Fog, Severity::Mor(60.0))
+        .near_range(true)
+        .lidar(spec)
+        .build(&none)
+        .unwrap();
+    let (out, summary) = ap.apply(&scan, "s0").unwrap();
+    assert_eq!(summary.ghost.as_ref().unwrap().expected, 0.0);
+    assert_eq!(summary.ring.as_ref().unwrap().expected, 36.0 / 3.0);
+    // (The 300 m returns vanish at MOR 60 m: only ring returns remain.)
+    let ring = summary.ring.as_ref().unwrap();
+    assert_eq!(out.len() as u64, ring.added, "{summary:?}");
+    assert!(ring.drawn > 0);
+    for i in 0..out.len() {
+        let (x, y, z) = (out.x[i], out.y[i], out.z[i]);
+        assert!((x * x + y * y + z * z).sqrt() < 3.0);
+    }
+}
+
 #[test]
 fn the_monotone_and_parametric_shapes_apply_at_the_applied_mor() {
     let shaped =

@@ -10,7 +10,7 @@
 //! | observable | the function's value `f` is | neutral |
 //! |---|---|---|
 //! | `survival` | a factor on the vanishing distance: `D ← D·f` | 1 |
-//! | `count` | a factor on the expected ghost and ring counts per scan | 1 |
+//! | `count` | a factor on the expected ghost and ring counts per scan (along a point covariate: on their density over the rays and along range) | 1 |
 //! | `range` | a bias added to the range of kept returns, metres | 0 |
 //! | `intensity` | a factor on the reflectivity of kept returns | 1 |
 //!
@@ -403,11 +403,11 @@ impl ModelExtension {
         }
         if self.observable == ExtensionObservable::Count
             && self.is_point_level()
-            && !COUNT_RAY_COVARIATES.contains(&self.covariate.as_str())
+            && !COUNT_POINT_COVARIATES.contains(&self.covariate.as_str())
         {
             return Err(format!(
-                "a count term needs a covariate of the near-range return's ray ({}) or a scan-level one (mor or a weather.csv column), not {:?}",
-                COUNT_RAY_COVARIATES.join(", "),
+                "a count term needs a covariate of the near-range return ({}) or a scan-level one (mor or a weather.csv column), not {:?}",
+                COUNT_POINT_COVARIATES.join(", "),
                 self.covariate
             ));
         }
@@ -461,25 +461,45 @@ impl ModelExtension {
     }
 }
 
-/// The point-level covariates a count term may follow: those of the ray a
+/// The point-level covariates a count term may follow on the ray a
 /// near-range return is placed on (its laser `ring`, that laser's
-/// `elevation`, and the ray's `azimuth`). The other point-level names
-/// describe a clear return, which a ghost on an empty ray does not have.
+/// `elevation`, and the ray's `azimuth`): the seed-004 azimuthal factor
+/// F_l(φ) and its per-laser analogue.
 pub const COUNT_RAY_COVARIATES: [&str; 3] = ["ring", "elevation", "azimuth"];
+
+/// Every point-level covariate a count term may follow: the ray's
+/// ([`COUNT_RAY_COVARIATES`]) and `range`, which for a count term is the
+/// near-range return's **own** range (its distance along the ray, the
+/// seed-004 per-echo range law F_j(x)), not that of a clear return. The
+/// other point-level name (`reflectivity`) describes a clear return, which
+/// a ghost on an empty ray does not have.
+pub const COUNT_POINT_COVARIATES: [&str; 4] = ["ring", "elevation", "azimuth", "range"];
+
+/// Number of equal-probability cells over which [`RayDensity::range_cells`]
+/// tabulates a distance law reweighted by range terms.
+pub const RANGE_CELLS: usize = 1024;
 
 /// Where near-range (ghost and ring) returns fall: the one evaluation of the
 /// point-level count terms, used by `murk apply` when it places the returns
 /// (`murk diagnose` measures such terms through `murk apply`'s simulations).
 ///
-/// The expected number of returns a scan places on the ray `(ring, azimuth)`
-/// is `N/(R·B) · g(ring)·h(azimuth)`, where `N` is the count law's
-/// expectation (times the scan-level count terms), `R·B` the rays (rings
-/// present × azimuth bins), `g` the product of the count terms along `ring`
-/// and `elevation` and `h` the product of those along `azimuth`. So the
-/// terms both redistribute the returns over the rays and scale their total
-/// by the mean of `g` over the rings times the mean of `h` over the bins
-/// ([`RayDensity::total_factor`]). Without point-level count terms both are
-/// 1 and the placement is uniform.
+/// This is the seed-004 law family `P(X > x) = F_j(x)·F_l(φ)`, written as a
+/// density over the rays and along range. The expected number of returns a
+/// scan places on the ray `(ring, azimuth)` at a range in `[r, r + dr]` is
+///
+/// `N/(R·B) · g(ring)·h(azimuth) · p(r)·k(r) dr`,
+///
+/// where `N` is the count law's expectation (times the scan-level count
+/// terms), `R·B` the rays (rings present × azimuth bins), `p` the table's
+/// (truncated Gaussian) distance law of the kind, `g` the product of the
+/// count terms along `ring` and `elevation`, `h` the product of those along
+/// `azimuth`, and `k` the product of those along `range`. So the terms
+/// redistribute the returns over the rays and along range, and scale their
+/// total by the mean of `g` over the rings, the mean of `h` over the bins
+/// ([`RayDensity::total_factor`]) and the mean of `k` under `p`
+/// ([`RayDensity::range_cells`]; it differs between the ghost and the ring
+/// law). Without point-level count terms all three are 1 and the placement
+/// is the table's: uniform over the rays, Gaussian along range.
 ///
 /// ```
 /// use murk_types::{ExtensionFunction, ExtensionObservable, ModelExtension, RayDensity};
@@ -497,11 +517,59 @@ pub const COUNT_RAY_COVARIATES: [&str; 3] = ["ring", "elevation", "azimuth"];
 /// let g = d.ring_weights(&rings);
 /// assert_eq!(g, vec![3.0, 1.0, 3.0, 1.0]);
 /// assert_eq!(d.total_factor(&g, &[1.0]), 2.0);
+///
+/// // Twice as many returns nearer than 5 m as the distance law says.
+/// let near = ModelExtension {
+///     covariate: "range".into(),
+///     function: ExtensionFunction::Bins { edges: vec![5.0], values: vec![2.0, 1.0] },
+///     ..t
+/// };
+/// let d = RayDensity::new(std::slice::from_ref(&near));
+/// assert!(d.has_range_terms());
+/// // A law uniform on [3, 7] m: half its mass below 5 m, so the mean factor
+/// // is 1.5 and two thirds of the returns fall below 5 m.
+/// let cells = d.range_cells(|t| 3.0 + 4.0 * t).unwrap();
+/// assert!((cells.mean - 1.5).abs() < 1e-12);
+/// let below = cells.cumulative[cells.cumulative.len() / 2 - 1];
+/// assert!((below - 2.0 / 3.0).abs() < 1e-12);
 /// ```
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct RayDensity {
     beam: Vec<ModelExtension>,
     azimuth: Vec<ModelExtension>,
+    range: Vec<ModelExtension>,
+}
+
+/// A distance law reweighted by the range terms, tabulated over
+/// [`RANGE_CELLS`] cells of equal probability under the law
+/// ([`RayDensity::range_cells`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct RangeCells {
+    /// Normalised cumulative weight of the cells (the last is 1): cell `i`
+    /// is drawn with probability `cumulative[i] − cumulative[i − 1]`.
+    pub cumulative: Vec<f64>,
+    /// The mean of `k` under the law: the factor on the expected count.
+    pub mean: f64,
+}
+
+impl RangeCells {
+    /// Maps a uniform `u` in `[0, 1)` to a probability fraction `t` of the
+    /// unweighted law (its quantile gives the range): the cell by the
+    /// cumulative weights, then the position inside the cell from the rest
+    /// of `u`, so one uniform makes one draw. Exact for `k` constant inside
+    /// each cell; `k` is read at the cells' centres.
+    pub fn fraction(&self, u: f64) -> f64 {
+        let n = self.cumulative.len();
+        let i = self.cumulative.partition_point(|&c| c <= u).min(n - 1);
+        let lo = if i == 0 { 0.0 } else { self.cumulative[i - 1] };
+        let hi = self.cumulative[i];
+        let inside = if hi > lo {
+            ((u - lo) / (hi - lo)).clamp(0.0, 1.0)
+        } else {
+            0.5
+        };
+        (i as f64 + inside) / n as f64
+    }
 }
 
 impl RayDensity {
@@ -520,12 +588,14 @@ impl RayDensity {
         RayDensity {
             beam: of(&["ring", "elevation"]),
             azimuth: of(&["azimuth"]),
+            range: of(&["range"]),
         }
     }
 
-    /// True when no term changes the placement (uniform over the rays).
+    /// True when no term changes the placement (uniform over the rays,
+    /// the table's law along range).
     pub fn is_uniform(&self) -> bool {
-        self.beam.is_empty() && self.azimuth.is_empty()
+        self.beam.is_empty() && self.azimuth.is_empty() && self.range.is_empty()
     }
 
     /// True when a term follows `ring` or `elevation`.
@@ -536,6 +606,11 @@ impl RayDensity {
     /// True when a term follows `azimuth`.
     pub fn has_azimuth_terms(&self) -> bool {
         !self.azimuth.is_empty()
+    }
+
+    /// True when a term follows the returns' own `range`.
+    pub fn has_range_terms(&self) -> bool {
+        !self.range.is_empty()
     }
 
     fn product(terms: &[ModelExtension], p: &PointCovariates) -> f64 {
@@ -584,8 +659,60 @@ impl RayDensity {
             .collect()
     }
 
+    /// `k` at a near-range return's own range (metres).
+    pub fn range_weight(&self, range_m: f64) -> f64 {
+        Self::product(
+            &self.range,
+            &PointCovariates {
+                range: range_m,
+                reflectivity: f64::NAN,
+                ring: u16::MAX,
+                elevation: f64::NAN,
+                azimuth: f64::NAN,
+            },
+        )
+    }
+
+    /// A distance law reweighted by `k`: `quantile(t)` is the law's range at
+    /// probability fraction `t` in `[0, 1]` of its (truncated) mass. `k` is
+    /// read at the centres of [`RANGE_CELLS`] cells of equal probability;
+    /// the cells' shares are `k/ΣK` and the mean of `k` is the factor on
+    /// the expected count. `None` without range terms, or when `k` is 0
+    /// (or not finite) everywhere: then no return of the kind is placed
+    /// (the caller's expected count times a mean of 0).
+    pub fn range_cells(&self, quantile: impl Fn(f64) -> f64) -> Option<RangeCells> {
+        if self.range.is_empty() {
+            return None;
+        }
+        let n = RANGE_CELLS;
+        let w: Vec<f64> = (0..n)
+            .map(|i| {
+                let k = self.range_weight(quantile((i as f64 + 0.5) / n as f64));
+                if k.is_finite() { k.max(0.0) } else { 0.0 }
+            })
+            .collect();
+        let total: f64 = w.iter().sum();
+        if !(total > 0.0 && total.is_finite()) {
+            return None;
+        }
+        let mut acc = 0.0;
+        let cumulative = w
+            .iter()
+            .map(|x| {
+                acc += x;
+                acc / total
+            })
+            .collect();
+        Some(RangeCells {
+            cumulative,
+            mean: total / n as f64,
+        })
+    }
+
     /// The factor on the scan's expected count: mean of the ring weights
-    /// times mean of the azimuth weights (1 for empty lists).
+    /// times mean of the azimuth weights (1 for empty lists). The range
+    /// terms' factor depends on the kind's distance law and comes from
+    /// [`RayDensity::range_cells`].
     pub fn total_factor(&self, ring_weights: &[f64], azimuth_weights: &[f64]) -> f64 {
         let mean = |v: &[f64]| {
             if v.is_empty() {

@@ -66,8 +66,9 @@ pub use cloud::PointCloud;
 pub use edge::{EdgeShape, LOGISTIC_UNIT};
 pub use error::TypesError;
 pub use extension::{
-    COUNT_RAY_COVARIATES, CovariateValue, ExtensionFunction, ExtensionObservable, ModelExtension,
-    POINT_COVARIATES, PointCovariates, RayDensity, combine as combine_extensions,
+    COUNT_POINT_COVARIATES, COUNT_RAY_COVARIATES, CovariateValue, ExtensionFunction,
+    ExtensionObservable, ModelExtension, POINT_COVARIATES, PointCovariates, RANGE_CELLS,
+    RangeCells, RayDensity, combine as combine_extensions,
 };
 pub use format::{BinLayout, PointFormat};
 pub use intensity::IntensityScale;
