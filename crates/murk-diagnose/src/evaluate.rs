@@ -475,6 +475,9 @@ pub struct Metrics {
     pub count_laser_abs_log_error: Option<f64>,
     /// The same per azimuth sector.
     pub count_sector_abs_log_error: Option<f64>,
+    /// The same per 1 m bin of the returns' own range (how they fall
+    /// along the rays: the seed-004 per-echo range law).
+    pub count_range_abs_log_error: Option<f64>,
     /// Mean range residual of kept returns, metres.
     pub range_bias_m: f64,
     /// RMS range residual of kept returns, metres.
@@ -508,6 +511,7 @@ impl Metrics {
             count: Option<f64>,
             lasers: Option<f64>,
             sectors: Option<f64>,
+            ranges: Option<f64>,
             scene: Option<SceneMetrics>,
         }
         let parts: Vec<Part> = evals
@@ -541,6 +545,7 @@ impl Metrics {
                     count: e.count_residual(rec).map(f64::abs),
                     lasers: count_bin_loss(&units, "ring"),
                     sectors: count_bin_loss(&units, "azimuth"),
+                    ranges: count_bin_loss(&units, "range"),
                     scene: e.scene,
                 }
             })
@@ -548,7 +553,8 @@ impl Metrics {
         let (mut ll, mut trials, mut ncr) = (0.0, 0.0, 0.0);
         let (mut rs, mut rs2, mut is, mut is2, mut nk) = (0.0f64, 0.0f64, 0.0f64, 0.0f64, 0.0f64);
         let mut count = Vec::new();
-        let (mut count_lasers, mut count_sectors) = (Vec::new(), Vec::new());
+        let (mut count_lasers, mut count_sectors, mut count_ranges) =
+            (Vec::new(), Vec::new(), Vec::new());
         let mut scenes = Vec::new();
         for part in parts {
             ll += part.ll;
@@ -562,6 +568,7 @@ impl Metrics {
             count.extend(part.count);
             count_lasers.extend(part.lasers);
             count_sectors.extend(part.sectors);
+            count_ranges.extend(part.ranges);
             scenes.extend(part.scene);
         }
         let n = evals.len().max(1) as f64;
@@ -573,6 +580,7 @@ impl Metrics {
             count_abs_log_error: mean(count),
             count_laser_abs_log_error: mean(count_lasers),
             count_sector_abs_log_error: mean(count_sectors),
+            count_range_abs_log_error: mean(count_ranges),
             range_bias_m: rs / nk.max(1.0),
             range_rmse_m: (rs2 / nk.max(1.0)).sqrt(),
             intensity_bias: is / nk.max(1.0),
@@ -598,8 +606,10 @@ impl Metrics {
     }
 
     /// The metric that measures `observable` along `covariate` (counts
-    /// along the lasers or azimuth: [`Metrics::count_laser_abs_log_error`],
-    /// [`Metrics::count_sector_abs_log_error`]).
+    /// along the lasers, azimuth or range:
+    /// [`Metrics::count_laser_abs_log_error`],
+    /// [`Metrics::count_sector_abs_log_error`],
+    /// [`Metrics::count_range_abs_log_error`]).
     pub fn of_test(
         &self,
         obs: ExtensionObservable,
@@ -613,6 +623,9 @@ impl Metrics {
                 "count_sector_abs_log_error",
                 self.count_sector_abs_log_error,
             ),
+            (ExtensionObservable::Count, "range") => {
+                ("count_range_abs_log_error", self.count_range_abs_log_error)
+            }
             _ => self.of_observable(obs),
         }
     }

@@ -12,9 +12,10 @@
 //! - `intensity`: `exp` of the mean log ratio of measured to reference
 //!   reflectivity;
 //! - `count`: `Σ(N_obs + ½) / Σ(N_sim + ½)` over the bin's recordings; along
-//!   `ring`, `elevation` or `azimuth`, `(Σn_obs + ½)/(Σn_sim + ½)` over the
-//!   bin's lasers or azimuth sectors in every recording (a factor on the density of the near-range
-//!   returns on those rays).
+//!   `ring`, `elevation`, `azimuth` or the returns' own `range`,
+//!   `(Σn_obs + ½)/(Σn_sim + ½)` over the bin's lasers, azimuth sectors or
+//!   1 m range bins in every recording (a factor on the density of the
+//!   near-range returns on those rays, or along range).
 //!
 //! Every term is fitted on top of the terms the table already has (the
 //! stagewise loop adds one at a time): survival factors multiply theirs,
@@ -347,7 +348,7 @@ fn fit_bins(
                 .collect();
             (v, pooled)
         }
-        ExtensionObservable::Count if murk_types::COUNT_RAY_COVARIATES.contains(&covariate) => {
+        ExtensionObservable::Count if murk_types::COUNT_POINT_COVARIATES.contains(&covariate) => {
             // Per bin of lasers (or azimuth sectors): (Σn_obs + ½)/(Σn_sim + ½)
             // over the fit set's recordings and the bin's units (a pseudo
             // count per unit would pull sparse bins to 1), the factor

@@ -113,10 +113,10 @@
 //! The semi-real source places weather returns only on firings that
 //! returned, the model on every ray: on its null campaigns count × azimuth
 //! is flagged at seed 45 (strength 1.9) and not at seed 67, count × range
-//! at both (3.4, 3.2). A count along
-//! the returns' own range is tested and reported but never extended: a
-//! term would reshape the near-range distance law, and the seed-004
-//! per-echo family (F_j(x) · F_l(φ)) is not built.
+//! at both (3.4, 3.2). A count along the returns' own range is extended
+//! like the others: a density along range that reshapes the kind's
+//! distance law (with the terms along the rays, the seed-004 per-echo
+//! family F_j(x) · F_l(φ), [`murk_types::RayDensity`]).
 //! **Shapes** (issue #13 item 4; `tests/shapes.rs`, measured 2026-12-03,
 //! test profile). Each candidate term is fitted per fold in every shape of
 //! [`extend::shapes`] and scored on held-out recordings; the simplest
@@ -1142,7 +1142,7 @@ impl DiagnoseValidParams {
                 // Counts per laser and azimuth sector (the rays the
                 // near-range returns fall on) and per bin of their own
                 // range.
-                for c in murk_types::COUNT_RAY_COVARIATES.iter().chain(&["range"]) {
+                for c in murk_types::COUNT_POINT_COVARIATES {
                     specs.push((obs, c.to_string(), true));
                 }
             } else {

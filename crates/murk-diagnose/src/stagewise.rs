@@ -66,7 +66,8 @@ pub fn recording_loss_of(
     obs: ExtensionObservable,
     covariate: &str,
 ) -> Option<f64> {
-    if obs == ExtensionObservable::Count && murk_types::COUNT_RAY_COVARIATES.contains(&covariate) {
+    if obs == ExtensionObservable::Count && murk_types::COUNT_POINT_COVARIATES.contains(&covariate)
+    {
         let rec = &loaded.recs[e.rec];
         return crate::evaluate::count_bin_loss(&e.count_bin_residuals(loaded, rec), covariate);
     }
@@ -98,13 +99,14 @@ pub fn recording_loss(loaded: &Loaded, e: &RecEval, obs: ExtensionObservable) ->
 }
 
 /// True when a term along `covariate` can be built for `obs`: every
-/// covariate but a count along the returns' own `range`, which would
-/// reshape the near-range distance law (the seed-004 per-echo family is not
-/// built). Such a finding is reported, never extended.
+/// covariate but a count along a point covariate that a near-range return
+/// does not have (`reflectivity` of a clear return; such a count is not
+/// tested). A count along the returns' own `range` reshapes their distance
+/// law ([`murk_types::RayDensity`]).
 pub fn has_term_shape(obs: ExtensionObservable, covariate: &str) -> bool {
     !(obs == ExtensionObservable::Count
         && murk_types::POINT_COVARIATES.contains(&covariate)
-        && !murk_types::COUNT_RAY_COVARIATES.contains(&covariate))
+        && !murk_types::COUNT_POINT_COVARIATES.contains(&covariate))
 }
 
 /// A candidate term fitted per fold and evaluated held-out.
@@ -193,6 +195,9 @@ pub(crate) fn term_text(
         "{} × f({covariate}) — {shape}, fitted per fold on the fit set",
         match obs {
             ExtensionObservable::Survival => "vanishing distance",
+            ExtensionObservable::Count if covariate == "range" => {
+                "density of ghost and ring returns along their own range"
+            }
             ExtensionObservable::Count if murk_types::COUNT_RAY_COVARIATES.contains(&covariate) => {
                 "density of ghost and ring returns on the rays"
             }
@@ -720,7 +725,7 @@ fn annotate(
                 )
             } else {
                 format!(
-                    "{} (not extended: a count along the returns' own range would reshape the near-range distance law, and that law family is not built)",
+                    "{} (not extended: a count term needs a covariate the near-range returns have)",
                     f.cause
                 )
             };
