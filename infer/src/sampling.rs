@@ -171,9 +171,9 @@ impl TruncNormal {
 
     /// The value at probability fraction `t` in `[0, 1]` of the truncated
     /// mass (the quantile; [`TruncNormal::sample`] at a uniform `t`).
-    pub(crate) fn at(&self, u: f64) -> f64 {
+    pub(crate) fn at(&self, t: f64) -> f64 {
         let z = if self.pb > self.pa {
-            norm_quantile(self.pa + u * (self.pb - self.pa)).clamp(self.a, self.b)
+            norm_quantile(self.pa + t * (self.pb - self.pa)).clamp(self.a, self.b)
         } else {
             // Both bounds so deep in the tail that Φ underflows: the law is
             // concentrated at the bound nearest to the mean.
