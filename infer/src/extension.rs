@@ -66,6 +66,9 @@ fn point_value(
     mor: f64,
     base: f64,
 ) -> f64 {
+    if terms.is_empty() {
+        return base;
+    }
     let scan = BTreeMap::new();
     let v = terms.iter().map(|t| t.value(Some(p), &scan, mor));
     if obs.multiplicative() {
@@ -151,6 +154,15 @@ impl Applier {
             of(ExtensionObservable::Range),
             of(ExtensionObservable::Intensity),
         );
+        // The angles (two `atan2` per point, most of this pass's time) only
+        // when a point-level term reads them; a table whose point-level
+        // terms are all counts (or along range, reflectivity or ring) needs
+        // the range alone, computed as `PointCovariates::of_point` does.
+        let needs_angles = surv_pt
+            .iter()
+            .chain(&range_pt)
+            .chain(&int_pt)
+            .any(|t| matches!(t.covariate.as_str(), "elevation" | "azimuth"));
         let mor = self.mor_m;
         let surv0 = scan_value(terms, ExtensionObservable::Survival, scan, mor);
         let range0 = scan_value(terms, ExtensionObservable::Range, scan, mor);
@@ -176,13 +188,18 @@ impl Applier {
                     .map(|i| {
                         let raw = cloud.intensity[i];
                         let refl = scale.to_calibrated(raw) as f64;
-                        let p = PointCovariates::of_point(
-                            cloud.x[i] as f64,
-                            cloud.y[i] as f64,
-                            cloud.z[i] as f64,
-                            refl,
-                            cloud.ring[i],
-                        );
+                        let (x, y, z) = (cloud.x[i] as f64, cloud.y[i] as f64, cloud.z[i] as f64);
+                        let p = if needs_angles {
+                            PointCovariates::of_point(x, y, z, refl, cloud.ring[i])
+                        } else {
+                            PointCovariates {
+                                range: x.hypot(y).hypot(z),
+                                reflectivity: refl,
+                                ring: cloud.ring[i],
+                                elevation: f64::NAN,
+                                azimuth: f64::NAN,
+                            }
+                        };
                         let f =
                             point_value(&surv_pt, ExtensionObservable::Survival, &p, mor, surv0);
                         let prob = self.survival_probability(p.range, refl, f, true);
