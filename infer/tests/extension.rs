@@ -243,6 +243,23 @@ fn several_terms_on_one_observable_combine() {
     assert!(windy3.apply(&scan, "s").unwrap().0.is_empty());
 }
 
+/// One return 300 m out on every laser of `spec` (at azimuth 0), so that
+/// every ring is present; at MOR 60 m they all vanish.
+fn far_return_per_laser(spec: &murk_types::LidarSpec) -> PointCloud {
+    let mut scan = PointCloud::with_capacity(spec.rings());
+    for ring in 0..spec.rings() as u16 {
+        let el = spec.elevation_deg[ring as usize].to_radians();
+        scan.push(
+            (300.0 * el.cos()) as f32,
+            0.0,
+            (300.0 * el.sin()) as f32,
+            50.0,
+            ring,
+        );
+    }
+    scan
+}
+
 #[test]
 fn count_terms_along_the_beams_place_ghosts_by_their_density() {
     // Hand-built known answer: ghost and ring returns three times as dense
@@ -267,18 +284,7 @@ fn count_terms_along_the_beams_place_ghosts_by_their_density() {
     ];
     t.validate().unwrap();
     let spec = murk_types::LidarSpec::vlp16();
-    // One far return per laser, so that every ring is present.
-    let mut scan = PointCloud::with_capacity(16);
-    for ring in 0..16u16 {
-        let el = spec.elevation_deg[ring as usize].to_radians();
-        scan.push(
-            (300.0 * el.cos()) as f32,
-            0.0,
-            (300.0 * el.sin()) as f32,
-            50.0,
-            ring,
-        );
-    }
+    let scan = far_return_per_laser(&spec);
     let ap = ApplyParams::new(WeatherClass::Fog, Severity::Mor(60.0))
         .near_range(true)
         .lidar(spec.clone())
@@ -366,17 +372,7 @@ fn count_terms_along_range_reshape_the_distance_law_and_scale_the_count() {
     let ghost_factor = 3.0 * p + 0.5 * (1.0 - p);
     let share_below = 3.0 * p / ghost_factor;
     let spec = murk_types::LidarSpec::vlp16();
-    let mut scan = PointCloud::with_capacity(16);
-    for ring in 0..16u16 {
-        let el = spec.elevation_deg[ring as usize].to_radians();
-        scan.push(
-            (300.0 * el.cos()) as f32,
-            0.0,
-            (300.0 * el.sin()) as f32,
-            50.0,
-            ring,
-        );
-    }
+    let scan = far_return_per_laser(&spec);
     let ap = ApplyParams::new(WeatherClass::Fog, Severity::Mor(60.0))
         .near_range(true)
         .lidar(spec.clone())
@@ -411,6 +407,11 @@ fn count_terms_along_range_reshape_the_distance_law_and_scale_the_count() {
         41.0 * ghost_factor
     );
     let share = below as f64 / ghosts as f64;
+    eprintln!(
+        "ghosts per scan {per_scan:.2} (expected {:.2}), share below 5 m {share:.4} (truth {share_below:.4}), ring mean {:.4} m",
+        41.0 * ghost_factor,
+        ring_sum / rings as f64
+    );
     assert!(
         (share - share_below).abs() < 0.012,
         "share below 5 m {share}, truth {share_below}"

@@ -138,23 +138,7 @@ fn downward_ghosts_in_rain_seed_66() {
 }
 
 fn semi_real(seed: u64, density: Vec<f64>) -> murk_diagnose::Diagnosis {
-    use murk_fixtures::semi_real::{SemiRealConfig, vlp16_campaign, vlp16_capture};
-    let capture = vlp16_capture(env!("CARGO_MANIFEST_DIR")).expect("checked by the caller");
-    let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("semi-real");
-    let cfg = SemiRealConfig {
-        declared_azimuth_deg: 0.4,
-        near_ring_density: density,
-        ..SemiRealConfig::default()
-    };
-    vlp16_campaign(&capture, &out, &cfg, seed).unwrap();
-    let campaign = murk_campaign::Campaign::open(&out).unwrap();
-    murk_diagnose::DiagnoseParams::new(WeatherClass::Fog)
-        .seed(seed)
-        .check()
-        .unwrap()
-        .run(&campaign)
-        .unwrap()
+    common::semi_real_fog(seed, |c| c.near_ring_density = density)
 }
 
 fn significant_counts(d: &murk_diagnose::Diagnosis) -> Vec<String> {

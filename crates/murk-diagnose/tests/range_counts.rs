@@ -165,23 +165,7 @@ fn near_ghosts_in_rain_seed_76() {
 }
 
 fn semi_real(seed: u64, density: Vec<[f64; 2]>) -> murk_diagnose::Diagnosis {
-    use murk_fixtures::semi_real::{SemiRealConfig, vlp16_campaign, vlp16_capture};
-    let capture = vlp16_capture(env!("CARGO_MANIFEST_DIR")).expect("checked by the caller");
-    let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("semi-real");
-    let cfg = SemiRealConfig {
-        declared_azimuth_deg: 0.4,
-        near_range_density: density,
-        ..SemiRealConfig::default()
-    };
-    vlp16_campaign(&capture, &out, &cfg, seed).unwrap();
-    let campaign = murk_campaign::Campaign::open(&out).unwrap();
-    murk_diagnose::DiagnoseParams::new(WeatherClass::Fog)
-        .seed(seed)
-        .check()
-        .unwrap()
-        .run(&campaign)
-        .unwrap()
+    common::semi_real_fog(seed, |c| c.near_range_density = density)
 }
 
 /// The semi-real source: the real VLP-16 revolutions weathered by the

@@ -544,3 +544,29 @@ pub fn check(case: &Case, d: &Diagnosis) -> Score {
     }
     s
 }
+
+/// A fog diagnosis of a semi-real campaign from the real VLP-16 capture
+/// (the caller checks it is present), declared at its 0.4° firing step,
+/// with `edit` applied to the default configuration.
+pub fn semi_real_fog(
+    seed: u64,
+    edit: impl FnOnce(&mut murk_fixtures::semi_real::SemiRealConfig),
+) -> Diagnosis {
+    use murk_fixtures::semi_real::{SemiRealConfig, vlp16_campaign, vlp16_capture};
+    let capture = vlp16_capture(env!("CARGO_MANIFEST_DIR")).expect("checked by the caller");
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("semi-real");
+    let mut cfg = SemiRealConfig {
+        declared_azimuth_deg: 0.4,
+        ..SemiRealConfig::default()
+    };
+    edit(&mut cfg);
+    vlp16_campaign(&capture, &out, &cfg, seed).unwrap();
+    let campaign = Campaign::open(&out).unwrap();
+    DiagnoseParams::new(WeatherClass::Fog)
+        .seed(seed)
+        .check()
+        .unwrap()
+        .run(&campaign)
+        .unwrap()
+}
