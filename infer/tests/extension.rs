@@ -243,6 +243,15 @@ fn several_terms_on_one_observable_combine() {
     assert!(windy3.apply(&scan, "s").unwrap().0.is_empty());
 }
 
+/// A fog applier at MOR 60 m with near-range returns on `spec`'s rays.
+fn near_applier(t: &CoefficientTable, spec: &murk_types::LidarSpec) -> murk_infer::Applier {
+    ApplyParams::new(WeatherClass::Fog, Severity::Mor(60.0))
+        .near_range(true)
+        .lidar(spec.clone())
+        .build(t)
+        .unwrap()
+}
+
 /// One return 300 m out on every laser of `spec` (at azimuth 0), so that
 /// every ring is present; at MOR 60 m they all vanish.
 fn far_return_per_laser(spec: &murk_types::LidarSpec) -> PointCloud {
@@ -285,11 +294,7 @@ fn count_terms_along_the_beams_place_ghosts_by_their_density() {
     t.validate().unwrap();
     let spec = murk_types::LidarSpec::vlp16();
     let scan = far_return_per_laser(&spec);
-    let ap = ApplyParams::new(WeatherClass::Fog, Severity::Mor(60.0))
-        .near_range(true)
-        .lidar(spec.clone())
-        .build(&t)
-        .unwrap();
+    let ap = near_applier(&t, &spec);
     let (mut down, mut up, mut first_half, mut second_half) = (0usize, 0usize, 0usize, 0usize);
     let mut expected = 0.0;
     let scans = 300;
@@ -373,11 +378,7 @@ fn count_terms_along_range_reshape_the_distance_law_and_scale_the_count() {
     let share_below = 3.0 * p / ghost_factor;
     let spec = murk_types::LidarSpec::vlp16();
     let scan = far_return_per_laser(&spec);
-    let ap = ApplyParams::new(WeatherClass::Fog, Severity::Mor(60.0))
-        .near_range(true)
-        .lidar(spec.clone())
-        .build(&t)
-        .unwrap();
+    let ap = near_applier(&t, &spec);
     let (mut ghosts, mut below, mut rings, mut ring_sum) = (0usize, 0usize, 0usize, 0.0f64);
     let scans = 300;
     for k in 0..scans {
@@ -432,12 +433,7 @@ fn count_terms_along_range_reshape_the_distance_law_and_scale_the_count() {
         vec![3.0],
         vec![1.0, 0.0],
     )];
-    let ap = ApplyParams::new(WeatherClass::Fog, Severity::Mor(60.0))
-        .near_range(true)
-        .lidar(spec)
-        .build(&none)
-        .unwrap();
-    let (out, summary) = ap.apply(&scan, "s0").unwrap();
+    let (out, summary) = near_applier(&none, &spec).apply(&scan, "s0").unwrap();
     assert_eq!(summary.ghost.as_ref().unwrap().expected, 0.0);
     assert_eq!(summary.ring.as_ref().unwrap().expected, 36.0 / 3.0);
     // (The 300 m returns vanish at MOR 60 m: only ring returns remain.)
