@@ -110,10 +110,18 @@
 //! | semi-real fog | 67 | 1/1 | count × timestamp and × range, both flagged without the effect too | +19.6 % (p 0.0005) | – |
 //! | generated nulls (fog 41–43, rain 44) | – | – | 0 | none | – |
 //!
-//! The semi-real source places weather returns only on firings that
-//! returned, the model on every ray: on its null campaigns count × azimuth
-//! is flagged at seed 45 (strength 1.9) and not at seed 67, count × range
-//! at both (3.4, 3.2).
+//! On the semi-real source's null campaigns count × azimuth is flagged at
+//! seed 45 (strength 1.9) and not at seed 67, count × range at both (3.4,
+//! 3.2), count × timestamp at 67 and 77 (accepted as a step at 77). The
+//! findings are right about the data, not the model's error: the real
+//! capture's own near-range returns change over its 50 revolutions
+//! (measured per revolution: 2,079 returns at 3–6 m in the first, 2,288 in
+//! the last, rising from about the 35th; < 3 m 9,599 → 9,402), and its
+//! later revolutions are the degraded recordings, so these hold more
+//! unpaired near returns than the clear reference, at some ranges and
+//! azimuths, growing with time. (Placing the source's weather returns on
+//! its empty firings too, reconstructed from each laser's grid, was tried:
+//! the flags stayed, so it is not kept.)
 //!
 //! **Counts along range** (the seed-004 law family F_j(x) · F_l(φ): with
 //! the terms along the rays, a count term along the returns' own range, a
@@ -132,10 +140,9 @@
 //! | semi-real fog | 77 | significant (strength 4.69; 3.81 without the effect) | count × timestamp, flagged without the effect too | not extended: +3.9 %, p 0.18 | – |
 //!
 //! On the semi-real source the range density is found but a term along
-//! range gains too little held out to be accepted: which ghosts stay
-//! visible differs between the source (only firings that returned) and the
-//! model (every ray), and by MOR, which a density along range alone cannot
-//! follow.
+//! range gains too little held out to be accepted: the capture's own
+//! near-range returns change with time (above), in the same range bins,
+//! which a density along range alone cannot follow.
 //!
 //! **Shapes** (issue #13 item 4; `tests/shapes.rs`, measured 2026-12-03,
 //! test profile). Each candidate term is fitted per fold in every shape of

@@ -130,10 +130,11 @@ fn null_campaigns_show_no_count_along_mor() {
         eprintln!("{line}");
         lines.push(line);
         flagged += usize::from(f);
-        // Not a null along the rays: this source places weather returns
-        // only on firings that returned (the capture has no direction for
-        // the others), the model on every ray, so count × azimuth is a real
-        // misfit here (flagged at seed 45, strength 1.9). Printed only.
+        // Not a null along the rays: the capture's own near-range returns
+        // change over its revolutions (the later ones, the degraded
+        // recordings, hold about 200 more at 3–6 m), at some azimuths, so
+        // count × azimuth is right about these data (flagged at seed 45,
+        // strength 1.9; see murk-diagnose's lib docs). Printed only.
         let (line, _) = count_rays(&d, "semi-real fog seed 45");
         eprintln!("{line}");
     }

@@ -152,12 +152,12 @@ fn significant_counts(d: &murk_diagnose::Diagnosis) -> Vec<String> {
 
 /// The semi-real source: the real VLP-16 revolutions weathered by the
 /// ground-truth fog model, the ghost and ring returns three times as dense
-/// on the downward lasers' firings (skipped without the capture). This
-/// source places weather returns only on firings that returned (the
-/// capture records no direction for the others), where the model places
-/// them on every ray: what the same campaign without the effect shows is
-/// the source's own misfit, so a significant count finding other than the
-/// hidden one must be flagged there too.
+/// on the downward lasers' firings (skipped without the capture). The
+/// capture's own near-range returns change over its revolutions (the later
+/// ones, the degraded recordings, hold more of them: see murk-diagnose's
+/// lib docs), so what the same campaign without the effect shows is the
+/// data's own, and a significant count finding other than the hidden one
+/// must be flagged there too.
 #[test]
 fn downward_ghosts_semi_real_fog() {
     use murk_fixtures::semi_real::{VLP16_ELEVATIONS, vlp16_capture};

@@ -170,12 +170,12 @@ fn semi_real(seed: u64, density: Vec<[f64; 2]>) -> murk_diagnose::Diagnosis {
 
 /// The semi-real source: the real VLP-16 revolutions weathered by the
 /// ground-truth fog model with the same range density (skipped without the
-/// capture). This source places weather returns only on firings that
-/// returned (the capture holds no direction for the others), the model on
-/// every ray, so which ghosts stay visible differs between them, and by MOR
-/// (how many clear returns vanish): on its null campaign count × range is
-/// already flagged, and a density along range alone cannot remove a misfit
-/// that changes with MOR. What must hold: the count along range is
+/// capture). The capture's own near-range returns change over its
+/// revolutions (about 200 more at 3–6 m in the later ones, which are the
+/// degraded recordings: see murk-diagnose's lib docs), so count × range is
+/// already flagged on the same campaign without the effect, and a density
+/// along range alone cannot follow a change in time. What must hold: the
+/// count along range is
 /// significant, stronger than on the same campaign without the effect,
 /// and it is extended only with a held-out gain (a step gains, and then its
 /// range distribution matches the truth, or the report gives the reason it
