@@ -122,6 +122,7 @@ fn null_campaigns_show_no_count_along_mor() {
         let out = dir.path().join("semi-real");
         let cfg = SemiRealConfig {
             declared_azimuth_deg: 0.4,
+            interleave_revolutions: true,
             ..SemiRealConfig::default()
         };
         vlp16_campaign(&capture, &out, &cfg, 45).unwrap();
@@ -131,10 +132,11 @@ fn null_campaigns_show_no_count_along_mor() {
         lines.push(line);
         flagged += usize::from(f);
         // Not a null along the rays: the capture's own near-range returns
-        // change over its revolutions (the later ones, the degraded
-        // recordings, hold about 200 more at 3–6 m), at some azimuths, so
-        // count × azimuth is right about these data (flagged at seed 45,
-        // strength 1.9; see murk-diagnose's lib docs). Printed only.
+        // differ between its revolutions (about 200 more at 3–6 m in the
+        // last ones), so with the clear revolutions spread over the capture
+        // count × range and × azimuth are right about these data (flagged
+        // at seed 45, strengths 1.60 and 1.20; see murk-diagnose's lib
+        // docs). Printed only.
         let (line, _) = count_rays(&d, "semi-real fog seed 45");
         eprintln!("{line}");
     }
