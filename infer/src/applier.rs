@@ -55,6 +55,9 @@ pub struct Applier {
     pub(crate) seed: u64,
     pub(crate) warnings: Vec<String>,
     pub(crate) extensions: Vec<murk_types::ModelExtension>,
+    /// Where near-range returns fall: the point-level count terms of
+    /// `extensions`, gathered once.
+    pub(crate) density: murk_types::RayDensity,
     pub(crate) scan_covariates: std::collections::BTreeMap<String, murk_types::CovariateValue>,
 }
 
@@ -358,7 +361,7 @@ impl Applier {
             ring: laws.1,
             lidar: self.lidar.as_ref(),
             azimuth_resolution_deg: self.azimuth_resolution_deg,
-            density: murk_types::RayDensity::new(&self.extensions),
+            density: &self.density,
         };
         let (g, r) = add_near_range(
             cloud,

@@ -275,6 +275,11 @@ impl ApplyParams {
             (None, None)
         };
         let extensions = self.extension_terms(coeffs, identity, label, &mut warnings)?;
+        let density = murk_types::RayDensity::new(&extensions);
+        let (ghost, ring) = (
+            ghost.map(|l| l.with_range_terms(&density)),
+            ring.map(|l| l.with_range_terms(&density)),
+        );
 
         Ok(Applier {
             weather: w,
@@ -296,6 +301,7 @@ impl ApplyParams {
             seed: self.seed,
             warnings,
             extensions,
+            density,
             scan_covariates: self.covariates.clone(),
         })
     }

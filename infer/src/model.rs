@@ -8,7 +8,9 @@
 //! (`kernel`, `near`, `extension`, which read them), so that each of those
 //! depends on this module and none on another's internals.
 
-use murk_types::{EdgeShape, NoiseLaw, SurvivalFit, WeatherClass};
+use murk_types::{EdgeShape, NoiseLaw, RayDensity, SurvivalFit, WeatherClass};
+use rand::RngExt;
+use rand::rngs::ChaCha8Rng;
 use serde::Serialize;
 
 use crate::sampling::TruncNormal;
@@ -113,6 +115,12 @@ pub(crate) struct NearLaw {
     pub count_source: &'static str,
     pub distance: TruncNormal,
     pub reflectivity: TruncNormal,
+    /// The distance law reweighted by the table's count terms along range
+    /// (`None` without such terms: the law as it is).
+    pub range: Option<murk_types::RangeCells>,
+    /// Those terms' factor on the expected count (their mean under the
+    /// law; 1 without them, 0 when they are 0 over the whole law).
+    pub range_factor: f64,
 }
 
 impl NearLaw {
@@ -147,7 +155,29 @@ impl NearLaw {
             count_source,
             distance: TruncNormal::new(l.distance_m.mean, l.distance_m.std, dlo, dhi),
             reflectivity: TruncNormal::new(l.reflectivity.mean, l.reflectivity.std, rlo, rhi),
+            range: None,
+            range_factor: 1.0,
         })
+    }
+
+    /// The law with the count terms along range of `density` (the
+    /// applier's, fixed for its MOR): the reweighted distance law tabulated
+    /// once, not per scan.
+    pub(crate) fn with_range_terms(mut self, density: &RayDensity) -> NearLaw {
+        if density.has_range_terms() {
+            let cells = density.range_cells(|t| self.distance.at(t));
+            self.range_factor = cells.as_ref().map_or(0.0, |c| c.mean);
+            self.range = cells;
+        }
+        self
+    }
+
+    /// One draw of the distance (one uniform, reweighted or not).
+    pub(crate) fn sample_distance(&self, rng: &mut ChaCha8Rng) -> f64 {
+        match &self.range {
+            None => self.distance.sample(rng),
+            Some(c) => self.distance.at(c.fraction(rng.random())),
+        }
     }
 }
 

@@ -12,9 +12,10 @@
 //! expected counts scale with their means ([`murk_types::RayDensity`]).
 //! With count terms along the returns' own `range` (the seed-004 per-echo
 //! range law), each kind's distance is drawn from its truncated Gaussian
-//! reweighted by the terms — tabulated over equal-probability cells of the
-//! law ([`murk_types::RangeCells`]), still one uniform per draw — and its
-//! expected count scales by the terms' mean under that law.
+//! reweighted by the terms — tabulated once per applier over
+//! equal-probability cells of the law ([`murk_types::RangeCells`]), still
+//! one uniform per draw — and its expected count scales by the terms' mean
+//! under that law.
 //! Then, on that ray:
 //!
 //! - if the ray has returns (after vanishing), one of them is the return of
@@ -94,7 +95,7 @@ pub(crate) struct NearSettings<'a> {
     pub azimuth_resolution_deg: f64,
     /// Where the returns fall over the rays (the table's point-level count
     /// terms; uniform without them).
-    pub density: RayDensity,
+    pub density: &'a RayDensity,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -222,25 +223,11 @@ pub(crate) fn add_near_range(
         let total = s.density.total_factor(&g, &h);
         (cumulative(&g), cumulative(&h), total)
     };
-    // Range terms: each kind's law reweighted, and its factor on the count
-    // (0 when the terms are 0 over the whole law).
-    let reweighted = |l: Option<&NearLaw>| {
-        l.filter(|_| s.density.has_range_terms())
-            .map(|l| s.density.range_cells(|t| l.distance.at(t)))
-    };
-    let (ghost_cells, ring_cells) = (reweighted(s.ghost), reweighted(s.ring));
-    let range_factor = |c: &Option<Option<murk_types::RangeCells>>| match c {
-        None => 1.0,
-        Some(None) => 0.0,
-        Some(Some(c)) => c.mean,
-    };
-    let (ghost_factor, ring_factor) = (range_factor(&ghost_cells), range_factor(&ring_cells));
     let mut rng = seed.rng(Purpose::NearRange, 0);
-    let expected = |l: &NearLaw, ghost: bool| {
-        l.expected * total * if ghost { ghost_factor } else { ring_factor }
-    };
-    let n_ghost = s.ghost.map_or(0, |l| poisson(&mut rng, expected(l, true)));
-    let n_ring = s.ring.map_or(0, |l| poisson(&mut rng, expected(l, false)));
+    // The range terms' factor comes with each law (`NearLaw::range_factor`).
+    let expected = |l: &NearLaw| l.expected * total * l.range_factor;
+    let n_ghost = s.ghost.map_or(0, |l| poisson(&mut rng, expected(l)));
+    let n_ring = s.ring.map_or(0, |l| poisson(&mut rng, expected(l)));
     let (tmin, tmax) = match &input.time {
         Some(t) if !t.is_empty() => t
             .par_iter()
@@ -256,22 +243,15 @@ pub(crate) fn add_near_range(
     };
 
     let mut events = Vec::with_capacity((n_ghost + n_ring) as usize);
-    for (law, n, ghost, cells) in [
-        (s.ghost, n_ghost, true, &ghost_cells),
-        (s.ring, n_ring, false, &ring_cells),
-    ] {
+    for (law, n, ghost) in [(s.ghost, n_ghost, true), (s.ring, n_ring, false)] {
         let Some(law) = law else { continue };
-        let cells = cells.as_ref().and_then(|c| c.as_ref());
         for _ in 0..n {
             let ring_u: f64 = rng.random();
             let bin = match &bin_cdf {
                 None => rng.random_range(0..bins),
                 Some(c) => pick_index(c, rng.random()) as u64,
             };
-            let distance = match cells {
-                None => law.distance.sample(&mut rng),
-                Some(c) => law.distance.at(c.fraction(rng.random())),
-            };
+            let distance = law.sample_distance(&mut rng);
             let reflectivity = law.reflectivity.sample(&mut rng);
             let pick: f64 = rng.random();
             let time_u: f64 = rng.random();
@@ -311,7 +291,7 @@ pub(crate) fn add_near_range(
     let tally = |law: Option<&NearLaw>, ghost: bool| {
         law.map(|l| {
             let mut c = NearRangeCounts {
-                expected: expected(l, ghost),
+                expected: expected(l),
                 count_source: l.count_source,
                 ..NearRangeCounts::default()
             };

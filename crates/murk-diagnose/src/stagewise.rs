@@ -98,17 +98,6 @@ pub fn recording_loss(loaded: &Loaded, e: &RecEval, obs: ExtensionObservable) ->
     }
 }
 
-/// True when a term along `covariate` can be built for `obs`: every
-/// covariate but a count along a point covariate that a near-range return
-/// does not have (`reflectivity` of a clear return; such a count is not
-/// tested). A count along the returns' own `range` reshapes their distance
-/// law ([`murk_types::RayDensity`]).
-pub fn has_term_shape(obs: ExtensionObservable, covariate: &str) -> bool {
-    !(obs == ExtensionObservable::Count
-        && murk_types::POINT_COVARIATES.contains(&covariate)
-        && !murk_types::COUNT_POINT_COVARIATES.contains(&covariate))
-}
-
 /// A candidate term fitted per fold and evaluated held-out.
 struct Candidate {
     /// The model of each fold with the term.
@@ -247,7 +236,6 @@ impl DiagnoseValidParams {
             for i in rank(&findings) {
                 let f = &findings[i];
                 if !f.significant
-                    || !has_term_shape(f.observable, &f.covariate)
                     || rejected_keys.contains_key(&key(f))
                     || accepted.iter().any(|(_, k)| *k == key(f))
                 {
@@ -710,25 +698,19 @@ fn annotate(
             continue;
         };
         if r == last {
-            // Still significant: the step cap stopped the loop first, or no
-            // term has its shape.
+            // Still significant: the step cap stopped the loop first (every
+            // tested covariate has a term: counts are tested only along the
+            // near-range returns' own covariates, `COUNT_POINT_COVARIATES`).
             if !f.significant
                 && let Some(g) = find(r, &k)
             {
                 *f = g.clone();
             }
-            f.cause = if has_term_shape(f.observable, &f.covariate) {
-                format!(
-                    "{} (not extended: the {} steps allowed were used first)",
-                    f.cause,
-                    crate::MAX_STEPS
-                )
-            } else {
-                format!(
-                    "{} (not extended: a count term needs a covariate the near-range returns have)",
-                    f.cause
-                )
-            };
+            f.cause = format!(
+                "{} (not extended: the {} steps allowed were used first)",
+                f.cause,
+                crate::MAX_STEPS
+            );
             continue;
         }
         // Significant in round r, not after the step accepted then.
