@@ -185,6 +185,209 @@ pub struct Kept {
     pub reflectivity: f32,
 }
 
+/// Bytes a [`Kept`] takes in memory and in a spill file (cell, range and
+/// reflectivity, little-endian).
+const KEPT_BYTES: usize = 12;
+
+/// The file the kept returns of a diagnosis spill to: an anonymous
+/// temporary file (unlinked at creation where the system allows, so a
+/// killed run leaves nothing), written once while the campaign loads and
+/// read back, one recording at a time, by every pass over kept returns.
+///
+/// A read that fails (the disk, not the data) is latched here instead of
+/// threaded through every pass: the pass sees no kept returns for that
+/// recording, and [`Loaded::spill_error`] turns the latched error into the
+/// diagnosis's error before anything is reported.
+#[derive(Debug)]
+pub struct SpillFile {
+    file: std::fs::File,
+    /// Where it was created (for messages).
+    dir: PathBuf,
+    error: std::sync::Mutex<Option<String>>,
+}
+
+impl SpillFile {
+    /// Creates the anonymous spill file in `dir` (the system's temporary
+    /// folder when `None`).
+    pub fn create(dir: Option<&Path>) -> Result<SpillFile, DiagnoseError> {
+        let dir = dir.map_or_else(std::env::temp_dir, Path::to_path_buf);
+        let file = tempfile::tempfile_in(&dir).map_err(|e| DiagnoseError::Read {
+            path: dir.clone(),
+            reason: format!("cannot create the spill file of the kept returns: {e}"),
+        })?;
+        Ok(SpillFile {
+            file,
+            dir,
+            error: std::sync::Mutex::new(None),
+        })
+    }
+
+    fn latch(&self, reason: String) {
+        let mut e = self.error.lock().unwrap_or_else(|p| p.into_inner());
+        e.get_or_insert(reason);
+    }
+
+    /// The first read error, if any.
+    fn error(&self) -> Option<String> {
+        self.error.lock().unwrap_or_else(|p| p.into_inner()).clone()
+    }
+
+    #[cfg(unix)]
+    fn read_at(&self, buf: &mut [u8], offset: u64) -> std::io::Result<()> {
+        std::os::unix::fs::FileExt::read_exact_at(&self.file, buf, offset)
+    }
+
+    #[cfg(windows)]
+    fn read_at(&self, mut buf: &mut [u8], mut offset: u64) -> std::io::Result<()> {
+        while !buf.is_empty() {
+            match std::os::windows::fs::FileExt::seek_read(&self.file, buf, offset)? {
+                0 => return Err(std::io::ErrorKind::UnexpectedEof.into()),
+                n => {
+                    buf = &mut buf[n..];
+                    offset += n as u64;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    #[cfg(not(any(unix, windows)))]
+    fn read_at(&self, _buf: &mut [u8], _offset: u64) -> std::io::Result<()> {
+        Err(std::io::Error::other(
+            "positioned reads are not supported here",
+        ))
+    }
+}
+
+/// A recording's kept returns: in memory, or in the diagnosis's
+/// [`SpillFile`] (when the campaign's kept returns exceed the memory
+/// budget, `DiagnoseParams::kept_memory_mb`), read back by [`Self::get`].
+/// Either way the same returns in the same order, so a diagnosis gives
+/// the same bytes spilled or not.
+#[derive(Debug, Clone)]
+pub struct KeptReturns(KeptStore);
+
+#[derive(Debug, Clone)]
+enum KeptStore {
+    Memory(Vec<Kept>),
+    Spilled {
+        file: std::sync::Arc<SpillFile>,
+        offset: u64,
+        len: usize,
+    },
+}
+
+impl PartialEq for KeptReturns {
+    fn eq(&self, other: &Self) -> bool {
+        match (&self.0, &other.0) {
+            (KeptStore::Memory(a), KeptStore::Memory(b)) => a == b,
+            (
+                KeptStore::Spilled { file, offset, len },
+                KeptStore::Spilled {
+                    file: f2,
+                    offset: o2,
+                    len: l2,
+                },
+            ) => std::sync::Arc::ptr_eq(file, f2) && offset == o2 && len == l2,
+            _ => false,
+        }
+    }
+}
+
+impl KeptReturns {
+    /// Kept returns held in memory.
+    pub fn in_memory(kept: Vec<Kept>) -> KeptReturns {
+        KeptReturns(KeptStore::Memory(kept))
+    }
+
+    /// Number of kept returns.
+    pub fn len(&self) -> usize {
+        match &self.0 {
+            KeptStore::Memory(v) => v.len(),
+            KeptStore::Spilled { len, .. } => *len,
+        }
+    }
+
+    /// Whether there is none.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Whether they are in the spill file.
+    pub fn is_spilled(&self) -> bool {
+        matches!(self.0, KeptStore::Spilled { .. })
+    }
+
+    /// Bytes they hold in memory.
+    pub fn heap_bytes(&self) -> usize {
+        match &self.0 {
+            KeptStore::Memory(v) => KEPT_BYTES * v.capacity(),
+            KeptStore::Spilled { .. } => 0,
+        }
+    }
+
+    /// The kept returns, in pairing order: borrowed from memory, or read
+    /// from the spill file. A failed read gives none and is latched (see
+    /// [`SpillFile`]).
+    pub fn get(&self) -> std::borrow::Cow<'_, [Kept]> {
+        match &self.0 {
+            KeptStore::Memory(v) => std::borrow::Cow::Borrowed(v),
+            KeptStore::Spilled { file, offset, len } => {
+                let mut buf = vec![0u8; len * KEPT_BYTES];
+                if let Err(e) = file.read_at(&mut buf, *offset) {
+                    file.latch(format!(
+                        "reading {len} kept returns back at byte {offset}: {e}"
+                    ));
+                    return std::borrow::Cow::Owned(Vec::new());
+                }
+                let word = |b: &[u8], i: usize| [b[i], b[i + 1], b[i + 2], b[i + 3]];
+                std::borrow::Cow::Owned(
+                    buf.chunks_exact(KEPT_BYTES)
+                        .map(|b| Kept {
+                            cell: u32::from_le_bytes(word(b, 0)),
+                            range: f32::from_le_bytes(word(b, 4)),
+                            reflectivity: f32::from_le_bytes(word(b, 8)),
+                        })
+                        .collect(),
+                )
+            }
+        }
+    }
+
+    /// Moves in-memory returns to the end of `file` (at `*end`, which it
+    /// advances); spilled ones stay where they are.
+    fn spill(
+        &mut self,
+        file: &std::sync::Arc<SpillFile>,
+        end: &mut u64,
+    ) -> Result<(), DiagnoseError> {
+        use std::io::Write;
+        let KeptStore::Memory(v) = &self.0 else {
+            return Ok(());
+        };
+        let mut buf = Vec::with_capacity(v.len() * KEPT_BYTES);
+        for k in v {
+            buf.extend_from_slice(&k.cell.to_le_bytes());
+            buf.extend_from_slice(&k.range.to_le_bytes());
+            buf.extend_from_slice(&k.reflectivity.to_le_bytes());
+        }
+        (&file.file)
+            .write_all(&buf)
+            .map_err(|e| DiagnoseError::Read {
+                path: file.dir.clone(),
+                reason: format!("cannot write kept returns to the spill file there: {e}"),
+            })?;
+        let len = v.len();
+        self.0 = KeptStore::Spilled {
+            file: std::sync::Arc::clone(file),
+            offset: *end,
+            len,
+        };
+        *end += buf.len() as u64;
+        Ok(())
+    }
+}
+
 /// A degraded recording as the diagnosis sees it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Rec {
@@ -201,8 +404,8 @@ pub struct Rec {
     pub lidar: PathBuf,
     /// Survival units.
     pub units: Units,
-    /// Kept returns.
-    pub kept: Vec<Kept>,
+    /// Kept returns (in memory or spilled; [`KeptReturns::get`]).
+    pub kept: KeptReturns,
     /// Ghost and ring returns measured.
     pub near: u64,
     /// The same returns by laser, azimuth sector and range bin.
@@ -320,6 +523,10 @@ impl ClearRec {
 /// few enough that memory does not grow with the campaign.
 const READ_CHUNK: usize = 16;
 
+/// Degraded recordings read at once by [`load_with`] before their kept
+/// returns are accounted against the memory budget.
+const LOAD_CHUNK: usize = 32;
+
 /// A campaign read for one weather.
 #[derive(Debug, Clone)]
 pub struct Loaded {
@@ -346,6 +553,23 @@ pub struct Loaded {
     pub clear_parts: Vec<std::sync::Arc<murk_fit::ClearPart>>,
     /// Recordings of the weather left out, with the reason.
     pub skipped: Vec<(String, String)>,
+    /// The file the kept returns beyond the memory budget went to
+    /// ([`KeptMemory`]), if any did.
+    pub spill: Option<std::sync::Arc<SpillFile>>,
+}
+
+impl Loaded {
+    /// The first failed read of spilled kept returns, as the diagnosis's
+    /// error (see [`SpillFile`]); `Ok` when none failed or nothing spilled.
+    pub fn spill_error(&self) -> Result<(), DiagnoseError> {
+        match self.spill.as_ref().and_then(|f| f.error().map(|e| (f, e))) {
+            Some((f, reason)) => Err(DiagnoseError::Read {
+                path: f.dir.clone(),
+                reason: format!("the spill file of the kept returns there: {reason}"),
+            }),
+            None => Ok(()),
+        }
+    }
 }
 
 /// Reflectivity below which the log ratio is floored.
@@ -412,7 +636,29 @@ pub fn load(
     weather: WeatherClass,
     params: &FitValidParams,
 ) -> Result<Loaded, DiagnoseError> {
-    load_with(campaign, weather, params, &[])
+    load_with(campaign, weather, params, &[], &KeptMemory::default())
+}
+
+/// Where [`load_with`] holds the degraded recordings' kept returns (12 bytes
+/// each: at a thousand recordings of 100 k points, over a gigabyte).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct KeptMemory {
+    /// Bytes of kept returns held in memory; the recordings (in campaign
+    /// order) whose returns would go beyond it spill to a [`SpillFile`].
+    /// `u64::MAX` (the default) holds everything, 0 spills everything.
+    pub budget_bytes: u64,
+    /// The folder of the spill file (the system's temporary folder when
+    /// `None`).
+    pub spill_dir: Option<PathBuf>,
+}
+
+impl Default for KeptMemory {
+    fn default() -> Self {
+        KeptMemory {
+            budget_bytes: u64::MAX,
+            spill_dir: None,
+        }
+    }
 }
 
 /// [`load`], with the fit's clear part ([`Loaded::clear_parts`]) mapped
@@ -426,6 +672,7 @@ pub fn load_with(
     weather: WeatherClass,
     params: &FitValidParams,
     fit_params: &[FitValidParams],
+    memory: &KeptMemory,
 ) -> Result<Loaded, DiagnoseError> {
     let inputs = FitInputs::from_campaign(campaign);
     let spec = inputs.lidar.clone();
@@ -594,75 +841,99 @@ pub fn load_with(
         .iter()
         .map(|&c| (c, reference.hits(c as usize)))
         .collect();
-    let recs: Vec<Result<Rec, DiagnoseError>> = wanted
-        .par_iter()
-        .map(|r| {
-            let (points, tally, pairs) = read_and_pair(r, &spec, &reference, params)?;
-            let mut occluded = vec![false; grid.cells()];
-            for &c in &tally.occluded {
-                occluded[c as usize] = true;
-            }
-            let units = Units::new(shared.clone(), tally.frames, |j| {
-                let c = shared[j].0 as usize;
-                (!occluded[c]).then(|| tally.matched[c])
-            });
-            let kept = pairs
-                .iter()
-                .map(|p| {
-                    let q = points[p.point as usize];
-                    Kept {
-                        cell: p.cell,
-                        range: q.range,
-                        reflectivity: q.reflectivity,
-                    }
-                })
-                .collect();
-            let rec = campaign
-                .recording(&r.id)
-                .ok_or_else(|| DiagnoseError::Campaign {
-                    weather: weather.to_string(),
-                    reason: format!("recording {} vanished from the campaign", r.id),
-                })?;
-            let mut scan = BTreeMap::new();
-            scan.insert(
-                "timestamp".to_string(),
-                CovariateValue::Number(rec.timestamp().timestamp() as f64),
-            );
-            for (name, v) in rec.values() {
-                match v {
-                    Some(Cell::Numeric(x)) => {
-                        scan.insert(name.to_string(), CovariateValue::Number(*x));
-                    }
-                    Some(Cell::Categorical(t)) => {
-                        scan.insert(name.to_string(), CovariateValue::Text(t.clone()));
-                    }
-                    None => {}
+    let load_one = |r: &&RecordingInput| -> Result<Rec, DiagnoseError> {
+        let (points, tally, pairs) = read_and_pair(r, &spec, &reference, params)?;
+        let mut occluded = vec![false; grid.cells()];
+        for &c in &tally.occluded {
+            occluded[c as usize] = true;
+        }
+        let units = Units::new(shared.clone(), tally.frames, |j| {
+            let c = shared[j].0 as usize;
+            (!occluded[c]).then(|| tally.matched[c])
+        });
+        let kept = pairs
+            .iter()
+            .map(|p| {
+                let q = points[p.point as usize];
+                Kept {
+                    cell: p.cell,
+                    range: q.range,
+                    reflectivity: q.reflectivity,
                 }
-            }
-            let mor = r.mor.unwrap_or(f64::NAN);
-            scan.insert("mor".to_string(), CovariateValue::Number(mor));
-            let order_j = order.get(r.id.as_str()).copied().unwrap_or(0);
-            let nearest = clear
-                .iter()
-                .enumerate()
-                .min_by_key(|(_, c)| (c.order.abs_diff(order_j), c.order))
-                .map(|(i, _)| i)
-                .unwrap_or(0);
-            Ok(Rec {
-                id: r.id.clone(),
-                order: order_j,
-                mor,
-                scan,
-                lidar: r.lidar.clone(),
-                units,
-                kept,
-                near: (tally.ghosts.len() + tally.rings.len()) as u64,
-                near_bins: NearHistogram::of_tally(&tally, &grid),
-                clear: nearest,
             })
+            .collect();
+        let kept = KeptReturns::in_memory(kept);
+        let rec = campaign
+            .recording(&r.id)
+            .ok_or_else(|| DiagnoseError::Campaign {
+                weather: weather.to_string(),
+                reason: format!("recording {} vanished from the campaign", r.id),
+            })?;
+        let mut scan = BTreeMap::new();
+        scan.insert(
+            "timestamp".to_string(),
+            CovariateValue::Number(rec.timestamp().timestamp() as f64),
+        );
+        for (name, v) in rec.values() {
+            match v {
+                Some(Cell::Numeric(x)) => {
+                    scan.insert(name.to_string(), CovariateValue::Number(*x));
+                }
+                Some(Cell::Categorical(t)) => {
+                    scan.insert(name.to_string(), CovariateValue::Text(t.clone()));
+                }
+                None => {}
+            }
+        }
+        let mor = r.mor.unwrap_or(f64::NAN);
+        scan.insert("mor".to_string(), CovariateValue::Number(mor));
+        let order_j = order.get(r.id.as_str()).copied().unwrap_or(0);
+        let nearest = clear
+            .iter()
+            .enumerate()
+            .min_by_key(|(_, c)| (c.order.abs_diff(order_j), c.order))
+            .map(|(i, _)| i)
+            .unwrap_or(0);
+        Ok(Rec {
+            id: r.id.clone(),
+            order: order_j,
+            mor,
+            scan,
+            lidar: r.lidar.clone(),
+            units,
+            kept,
+            near: (tally.ghosts.len() + tally.rings.len()) as u64,
+            near_bins: NearHistogram::of_tally(&tally, &grid),
+            clear: nearest,
         })
-        .collect();
-    let recs = recs.into_iter().collect::<Result<Vec<_>, _>>()?;
+    };
+    // Read in chunks, in parallel within each, and account the kept
+    // returns in campaign order: those beyond the budget spill, so memory
+    // stays within the budget plus one chunk whatever the campaign's size,
+    // and which recordings spill does not depend on the thread count (nor
+    // does the output, which is the same spilled or not).
+    let mut spill: Option<std::sync::Arc<SpillFile>> = None;
+    let (mut held, mut end) = (0u64, 0u64);
+    let mut recs = Vec::with_capacity(wanted.len());
+    for chunk in wanted.chunks(LOAD_CHUNK) {
+        let read: Vec<Result<Rec, DiagnoseError>> = chunk.par_iter().map(load_one).collect();
+        for r in read {
+            let mut r = r?;
+            let bytes = (KEPT_BYTES * r.kept.len()) as u64;
+            if held.saturating_add(bytes) > memory.budget_bytes {
+                let file = match &spill {
+                    Some(f) => f,
+                    None => spill.insert(std::sync::Arc::new(SpillFile::create(
+                        memory.spill_dir.as_deref(),
+                    )?)),
+                };
+                r.kept.spill(file, &mut end)?;
+            } else {
+                held += bytes;
+            }
+            recs.push(r);
+        }
+    }
     Ok(Loaded {
         weather,
         spec,
@@ -674,12 +945,66 @@ pub fn load_with(
         inputs,
         clear_parts,
         skipped,
+        spill,
     })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn spilled_returns_come_back_and_a_failed_read_is_latched() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = std::sync::Arc::new(SpillFile::create(Some(dir.path())).unwrap());
+        let a: Vec<Kept> = (0..5)
+            .map(|i| Kept {
+                cell: 1000 * i,
+                range: 1.5 + i as f32 / 3.0,
+                reflectivity: f32::from_bits(0x3f80_0001 + i),
+            })
+            .collect();
+        let b = vec![Kept {
+            cell: u32::MAX,
+            range: f32::MIN_POSITIVE,
+            reflectivity: -0.0,
+        }];
+        let mut end = 0;
+        let (mut ka, mut kb) = (
+            KeptReturns::in_memory(a.clone()),
+            KeptReturns::in_memory(b.clone()),
+        );
+        ka.spill(&file, &mut end).unwrap();
+        kb.spill(&file, &mut end).unwrap();
+        assert_eq!(end, 12 * 6);
+        assert!(ka.is_spilled() && kb.is_spilled());
+        assert_eq!((ka.len(), kb.len(), ka.heap_bytes()), (5, 1, 0));
+        let bits = |v: &[Kept]| -> Vec<(u32, u32, u32)> {
+            v.iter()
+                .map(|k| (k.cell, k.range.to_bits(), k.reflectivity.to_bits()))
+                .collect()
+        };
+        assert_eq!(bits(&ka.get()), bits(&a));
+        assert_eq!(bits(&kb.get()), bits(&b));
+        // Spilling again leaves them where they are.
+        ka.spill(&file, &mut end).unwrap();
+        assert_eq!(end, 12 * 6);
+        // A read past the file's end: none, and the error is latched.
+        let beyond = KeptReturns(KeptStore::Spilled {
+            file: std::sync::Arc::clone(&file),
+            offset: 12 * 6,
+            len: 2,
+        });
+        assert!(beyond.get().is_empty());
+        let msg = file.error().unwrap();
+        assert!(
+            msg.contains("reading 2 kept returns back at byte 72"),
+            "{msg}"
+        );
+        // Later reads still work; the first error stays.
+        assert_eq!(bits(&kb.get()), bits(&b));
+        assert_eq!(file.error().unwrap(), msg);
+    }
 
     #[test]
     fn units_give_back_the_list_they_were_built_from_at_every_width() {

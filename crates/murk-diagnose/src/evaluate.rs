@@ -85,6 +85,20 @@ pub struct RecEval {
     pub scene: Option<SceneMetrics>,
 }
 
+/// A kept return's range residual given the table's range extension
+/// `bias` ([`RecEval::range_residuals`]).
+fn range_residual(k: &Kept, c: &CellInfo, bias: f64) -> f64 {
+    k.range as f64 - c.cov.range - c.clear_range_offset - bias
+}
+
+/// A kept return's intensity residual given the table's intensity factor
+/// `fac` ([`RecEval::intensity_residuals`]).
+fn intensity_residual(k: &Kept, c: &CellInfo, fac: f64) -> f64 {
+    log_ratio(k.reflectivity as f64, c.cov.reflectivity)
+        - c.clear_log_reflectivity_offset
+        - fac.max(1e-6).ln()
+}
+
 impl RecEval {
     /// Keep probability per survival unit (aligned with `Rec::units`).
     pub fn p(&self, loaded: &Loaded) -> Vec<f64> {
@@ -114,9 +128,7 @@ impl RecEval {
     /// measured range less the reference cell's, less what pairing gives
     /// the cell in clear weather, less the table's range extension.
     pub fn range_residuals(&self, loaded: &Loaded) -> Vec<f64> {
-        self.per_kept(loaded, ExtensionObservable::Range, |k, c, bias| {
-            k.range as f64 - c.cov.range - c.clear_range_offset - bias
-        })
+        self.per_kept(loaded, ExtensionObservable::Range, range_residual)
     }
 
     /// Intensity log-ratio residual per kept return (aligned with
@@ -124,11 +136,7 @@ impl RecEval {
     /// the clear-weather offset, less the log of the table's intensity
     /// factor.
     pub fn intensity_residuals(&self, loaded: &Loaded) -> Vec<f64> {
-        self.per_kept(loaded, ExtensionObservable::Intensity, |k, c, fac| {
-            log_ratio(k.reflectivity as f64, c.cov.reflectivity)
-                - c.clear_log_reflectivity_offset
-                - fac.max(1e-6).ln()
-        })
+        self.per_kept(loaded, ExtensionObservable::Intensity, intensity_residual)
     }
 
     /// `residual(kept return, its reference cell, the table's extension of
@@ -139,25 +147,41 @@ impl RecEval {
         obs: ExtensionObservable,
         residual: impl Fn(&Kept, &CellInfo, f64) -> f64,
     ) -> Vec<f64> {
+        self.per_kept_cells(loaded, obs, residual)
+            .into_iter()
+            .map(|(_, r)| r)
+            .collect()
+    }
+
+    /// [`Self::per_kept`] with each return's reference cell (the kept
+    /// returns are read once, from memory or the spill file).
+    fn per_kept_cells(
+        &self,
+        loaded: &Loaded,
+        obs: ExtensionObservable,
+        residual: impl Fn(&Kept, &CellInfo, f64) -> f64,
+    ) -> Vec<(u32, f64)> {
         let rec = &loaded.recs[self.rec];
         rec.kept
+            .get()
             .iter()
             .map(|k| {
                 let c = loaded.cells[k.cell as usize]
                     .as_ref()
                     .expect("pairs are reference cells");
                 let ext = extension_value(&self.table, loaded, obs, &c.cov, &rec.scan, rec.mor);
-                residual(k, c, ext)
+                (k.cell, residual(k, c, ext))
             })
             .collect()
     }
 
-    /// The range (`Range`) or intensity (`Intensity`) residuals.
-    pub fn kept_residuals(&self, loaded: &Loaded, obs: ExtensionObservable) -> Vec<f64> {
+    /// The range (`Range`) or intensity (`Intensity`) residuals, each with
+    /// its kept return's reference cell.
+    pub fn kept_residuals(&self, loaded: &Loaded, obs: ExtensionObservable) -> Vec<(u32, f64)> {
         if obs == ExtensionObservable::Range {
-            self.range_residuals(loaded)
+            self.per_kept_cells(loaded, obs, range_residual)
         } else {
-            self.intensity_residuals(loaded)
+            self.per_kept_cells(loaded, obs, intensity_residual)
         }
     }
 

@@ -320,9 +320,8 @@ fn fit_bins(
             let mut s = vec![(0.0f64, 0.0f64); nb];
             for e in evals {
                 let rec = &loaded.recs[e.rec];
-                let res = e.kept_residuals(loaded, observable);
-                for (k, r) in rec.kept.iter().zip(res) {
-                    let cov = &cell(k.cell).cov;
+                for (k, r) in e.kept_residuals(loaded, observable) {
+                    let cov = &cell(k).cov;
                     if let Some(b) = bin_of(binning, covariate, cov, &rec.scan) {
                         s[b].0 += r;
                         s[b].1 += 1.0;
@@ -1061,9 +1060,8 @@ fn fit_parametric(
     let mut pts: Vec<(usize, f64, f64, f64)> = Vec::new();
     for (ri, e) in evals.iter().enumerate() {
         let rec = &loaded.recs[e.rec];
-        let res = e.kept_residuals(loaded, observable);
-        for (k, r) in rec.kept.iter().zip(res) {
-            if let Some(x) = x_of(covariate, &cell(k.cell).cov, &rec.scan) {
+        for (k, r) in e.kept_residuals(loaded, observable) {
+            if let Some(x) = x_of(covariate, &cell(k).cov, &rec.scan) {
                 pts.push((ri, x, rec.mor, r));
             }
         }

@@ -294,6 +294,8 @@ impl Relevance {
 /// | `point_bins` | 12 | quantile bins of continuous point covariates |
 /// | `scan_bins` | 4 | quantile bins of continuous scan covariates |
 /// | `detectable` | true | compute each test's minimum detectable effect ([`power`]) |
+/// | `kept_memory_mb` | 256 | megabytes of kept returns (12 bytes each) held in memory; the recordings beyond spill them to an anonymous temporary file, read back by each pass ([`data::KeptMemory`]; the output is the same bytes) |
+/// | `spill_dir` | the system's temporary folder | folder of that file (put it on a disk, not a RAM-backed `/tmp`) |
 #[derive(Debug, Clone)]
 pub struct DiagnoseParams {
     weather: WeatherClass,
@@ -309,6 +311,8 @@ pub struct DiagnoseParams {
     point_bins: usize,
     scan_bins: usize,
     detectable: bool,
+    kept_memory_mb: f64,
+    spill_dir: Option<std::path::PathBuf>,
 }
 
 /// Checked [`DiagnoseParams`].
@@ -332,7 +336,20 @@ impl DiagnoseParams {
             point_bins: 12,
             scan_bins: 4,
             detectable: true,
+            kept_memory_mb: 256.0,
+            spill_dir: None,
         }
+    }
+    /// Megabytes of kept returns held in memory before they spill to a
+    /// temporary file (0: all spill; `f64::INFINITY`: none does).
+    pub fn kept_memory_mb(mut self, mb: f64) -> Self {
+        self.kept_memory_mb = mb;
+        self
+    }
+    /// Folder of the spill file (`None`: the system's temporary folder).
+    pub fn spill_dir(mut self, dir: Option<std::path::PathBuf>) -> Self {
+        self.spill_dir = dir;
+        self
     }
     /// Compute each test's minimum detectable effect ([`power`]); off, the
     /// findings' `detectable` is null with the reason "not computed".
@@ -430,6 +447,22 @@ impl DiagnoseParams {
         }
         if self.sims == 0 {
             return bad("sims", "0".into(), "need ≥ 1 simulation per recording");
+        }
+        if !(self.kept_memory_mb >= 0.0) {
+            return bad(
+                "kept_memory_mb",
+                self.kept_memory_mb.to_string(),
+                "must be ≥ 0 (0 spills every recording's kept returns)",
+            );
+        }
+        if let Some(d) = &self.spill_dir
+            && !d.is_dir()
+        {
+            return bad(
+                "spill_dir",
+                d.display().to_string(),
+                "is not an existing folder",
+            );
         }
         if self.point_bins < 2 || self.scan_bins < 2 {
             return bad(
@@ -547,12 +580,13 @@ fn residuals(loaded: &Loaded, evals: &[RecEval]) -> Residuals {
             .or_default()
             .push((w > 0.0).then(|| s / w));
         for obs in [Range, Intensity] {
-            let res = &e.kept_residuals(loaded, obs);
+            let res = e.kept_residuals(loaded, obs);
             let v = cell_counts.entry(obs).or_insert_with(|| vec![0; cells]);
-            for (k, _) in rec.kept.iter().zip(res) {
-                v[k.cell as usize] += 1;
+            for (k, _) in &res {
+                v[*k as usize] += 1;
             }
-            let m = (!res.is_empty()).then(|| res.iter().sum::<f64>() / res.len() as f64);
+            let m = (!res.is_empty())
+                .then(|| res.iter().map(|(_, r)| r).sum::<f64>() / res.len() as f64);
             scans.entry(obs).or_default().push(m);
         }
         scans.entry(Count).or_default().push(e.count_residual(rec));
@@ -618,10 +652,9 @@ fn recording_units<'a>(
                 .map(move |(u, (r, w))| (i, cov(u.cell), r, w)),
         ),
         ExtensionObservable::Range | ExtensionObservable::Intensity => Box::new(
-            rec.kept
-                .iter()
-                .zip(e.kept_residuals(loaded, obs))
-                .map(move |(k, r)| (i, cov(k.cell), r, 1.0)),
+            e.kept_residuals(loaded, obs)
+                .into_iter()
+                .map(move |(k, r)| (i, cov(k), r, 1.0)),
         ),
         ExtensionObservable::Count => Box::new(
             e.count_bin_residuals(loaded, rec)
@@ -863,7 +896,11 @@ impl DiagnoseValidParams {
             Some(_) => vec![],
             None => vec![self.fold_fit_params()?, fit_params.clone()],
         };
-        let loaded = data::load_with(campaign, p.weather, &fit_params, &fits)?;
+        let memory = data::KeptMemory {
+            budget_bytes: (p.kept_memory_mb * 1e6) as u64,
+            spill_dir: p.spill_dir.clone(),
+        };
+        let loaded = data::load_with(campaign, p.weather, &fit_params, &fits, &memory)?;
         let n = loaded.recs.len();
         if n < MIN_RECORDINGS {
             return Err(DiagnoseError::Campaign {
@@ -959,15 +996,15 @@ impl DiagnoseValidParams {
             steps: sw.steps,
             rejected: sw.rejected,
         };
+        let figures =
+            report::FigureData::new(&loaded, &baseline.tables[folds.fold_of[0]], 0, sim.seed)?;
+        // A failed read of spilled kept returns made some pass see none:
+        // nothing computed after it is reported.
+        loaded.spill_error()?;
         Ok(Diagnosis {
             report,
             extended_table: Some(sw.table),
-            figures: report::FigureData::new(
-                &loaded,
-                &baseline.tables[folds.fold_of[0]],
-                0,
-                sim.seed,
-            )?,
+            figures,
         })
     }
 

@@ -1,10 +1,13 @@
 //! What a diagnosis holds per recording (issue #13 item 6): summaries per
 //! reference cell, never point clouds. The memory figures themselves are
 //! measured by `examples/diagnose_bench.rs`; this checks the representation
-//! they come from, on two generated campaigns.
+//! they come from, on two generated campaigns, and that kept returns beyond
+//! the memory budget spill to a file and come back bit for bit, with the
+//! diagnosis unchanged.
 
 use murk_campaign::Campaign;
-use murk_diagnose::data::{ClearRec, Kept, load};
+use murk_diagnose::DiagnoseParams;
+use murk_diagnose::data::{ClearRec, Kept, KeptMemory, load, load_with};
 use murk_diagnose::evaluate::RecEval;
 use murk_fit::FitParams;
 use murk_fixtures::{Generator, GeneratorConfig, OutputOptions, PerClass, Preset};
@@ -72,8 +75,122 @@ fn a_recording_is_held_as_per_cell_summaries_and_a_clear_one_as_its_path() {
                 r.id,
                 r.units.heap_bytes()
             );
-            let bytes = r.units.heap_bytes() + r.kept.len() * std::mem::size_of::<Kept>();
+            assert_eq!(
+                r.kept.heap_bytes(),
+                r.kept.len() * std::mem::size_of::<Kept>()
+            );
+            let bytes = r.units.heap_bytes() + r.kept.heap_bytes();
             assert!(bytes <= 14 * present, "{}: {bytes} bytes", r.id);
         }
     }
+}
+
+/// A generated fog campaign of `recordings` (30 % clear).
+fn campaign(seed: u64, recordings: usize) -> (tempfile::TempDir, Campaign) {
+    let dir = tempfile::tempdir().unwrap();
+    let mut c = GeneratorConfig::preset(Preset::Small);
+    c.campaign.recordings = recordings;
+    c.weather.mix = PerClass {
+        clear: 0.3,
+        fog: 0.7,
+        rain: 0.0,
+        snow: 0.0,
+    };
+    Generator::new(c)
+        .unwrap()
+        .write_campaign(seed, &OutputOptions::new(dir.path()))
+        .unwrap();
+    let campaign = Campaign::open(dir.path()).unwrap();
+    (dir, campaign)
+}
+
+#[test]
+fn kept_returns_beyond_the_budget_spill_and_read_back_bit_for_bit() {
+    let params = FitParams::default()
+        .require_edge(false)
+        .bootstrap_replicates(0)
+        .check()
+        .unwrap();
+    let (_dir, campaign) = campaign(5, 20);
+    let held = load(&campaign, WeatherClass::Fog, &params).unwrap();
+    assert!(held.spill.is_none());
+    let bytes: Vec<u64> = held.recs.iter().map(|r| 12 * r.kept.len() as u64).collect();
+    // A budget that holds the first three recordings: the rest spill.
+    let budget = bytes[..3].iter().sum::<u64>();
+    let spill_dir = tempfile::tempdir().unwrap();
+    let memory = KeptMemory {
+        budget_bytes: budget,
+        spill_dir: Some(spill_dir.path().to_path_buf()),
+    };
+    let spilled = load_with(&campaign, WeatherClass::Fog, &params, &[], &memory).unwrap();
+    assert!(spilled.spill.is_some());
+    assert_eq!(spilled.recs.len(), held.recs.len());
+    let mut in_memory = 0u64;
+    for (i, (a, b)) in held.recs.iter().zip(&spilled.recs).enumerate() {
+        assert_eq!(a.id, b.id);
+        assert_eq!(b.kept.is_spilled(), i >= 3, "{}", b.id);
+        assert_eq!(b.kept.len(), a.kept.len());
+        // The same returns, bit for bit, in the same order.
+        let (x, y) = (a.kept.get(), b.kept.get());
+        assert!(
+            x.iter().zip(y.iter()).all(|(p, q)| p.cell == q.cell
+                && p.range.to_bits() == q.range.to_bits()
+                && p.reflectivity.to_bits() == q.reflectivity.to_bits()),
+            "{}",
+            b.id
+        );
+        assert_eq!(x.len(), y.len());
+        if b.kept.is_spilled() {
+            assert_eq!(b.kept.heap_bytes(), 0);
+        } else {
+            in_memory += 12 * b.kept.len() as u64;
+        }
+    }
+    assert!(in_memory <= budget);
+    assert!(spilled.spill_error().is_ok());
+    // The spill file has no name: the folder stays empty.
+    assert_eq!(std::fs::read_dir(spill_dir.path()).unwrap().count(), 0);
+}
+
+#[test]
+fn a_diagnosis_is_the_same_bytes_with_its_kept_returns_spilled() {
+    let (_dir, campaign) = campaign(6, 24);
+    let run = |mb: f64| {
+        let d = DiagnoseParams::new(WeatherClass::Fog)
+            .folds(2)
+            .permutations(99)
+            .sims(1)
+            .detectable(false)
+            .kept_memory_mb(mb)
+            .check()
+            .unwrap()
+            .run(&campaign)
+            .unwrap();
+        (
+            d.report.to_json(),
+            d.extended_table.map(|t| t.to_json().unwrap()),
+        )
+    };
+    let (held, spilled) = (run(256.0), run(0.0));
+    assert!(held.0.contains("\"findings\""));
+    assert_eq!(held, spilled);
+}
+
+#[test]
+fn bad_spill_settings_are_refused_with_the_reason() {
+    let e = DiagnoseParams::new(WeatherClass::Fog)
+        .kept_memory_mb(f64::NAN)
+        .check()
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("kept_memory_mb") && e.contains("≥ 0"), "{e}");
+    let e = DiagnoseParams::new(WeatherClass::Fog)
+        .spill_dir(Some("/nonexistent/murk-spill".into()))
+        .check()
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("spill_dir") && e.contains("/nonexistent/murk-spill"),
+        "{e}"
+    );
 }

@@ -864,7 +864,8 @@ fn fit_partial(
 #[pyfunction]
 #[pyo3(signature = (
     campaign, weather, *, coefficients=None, folds=3, seed=0, permutations=1999, alpha=0.05,
-    sims=2, voxel=1.0, local_box=None, threads=None, extended_table=false
+    sims=2, voxel=1.0, local_box=None, threads=None, kept_memory_mb=256.0, spill_dir=None,
+    extended_table=false
 ))]
 #[allow(clippy::too_many_arguments)]
 fn diagnose(
@@ -880,6 +881,8 @@ fn diagnose(
     voxel: f64,
     local_box: Option<[f64; 6]>,
     threads: Option<usize>,
+    kept_memory_mb: f64,
+    spill_dir: Option<PathBuf>,
     extended_table: bool,
 ) -> PyResult<Py<PyAny>> {
     let weather = weather_arg(weather)?;
@@ -899,6 +902,8 @@ fn diagnose(
             max: [v[3], v[4], v[5]],
         }))
         .coefficients(table)
+        .kept_memory_mb(kept_memory_mb)
+        .spill_dir(spill_dir)
         .check()
         .map_err(|e| errors::diagnose(&e))?;
     let (json, ext) = py

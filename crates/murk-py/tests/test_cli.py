@@ -106,6 +106,23 @@ def test_diagnose_equals_cli(tmp_path, cli):
     args = ["--folds", "2", "--permutations", "99", "--sims", "1", "--seed", "2"]
     run_cli(cli, "diagnose", CAMPAIGN, "--weather", "fog", "--out", tmp_path / "r.json", *args)
     want = json.loads((tmp_path / "r.json").read_text())
-    got, ext = murk.diagnose(CAMPAIGN, "fog", folds=2, permutations=99, sims=1, seed=2, extended_table=True)
+    # The CLI holds the kept returns in memory; here every recording's
+    # spill to a temporary file in tmp_path: the same report.
+    got, ext = murk.diagnose(CAMPAIGN, "fog", folds=2, permutations=99, sims=1, seed=2,
+                             kept_memory_mb=0.0, spill_dir=tmp_path, extended_table=True)
     assert got == want
     assert (ext is None) == (not (tmp_path / "r.extended.json").exists())
+    # The anonymous spill file leaves nothing behind.
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
+        p for p in ["r.json", "r.extended.json"] if (tmp_path / p).exists())
+
+
+def test_diagnose_bad_spill_settings_raise_the_cli_message(tmp_path, cli):
+    for flag, kw in [(["--kept-memory-mb", "-1"], {"kept_memory_mb": -1.0}),
+                     (["--spill-dir", str(tmp_path / "missing")], {"spill_dir": tmp_path / "missing"})]:
+        p = subprocess.run([str(cli), "diagnose", str(CAMPAIGN), "--weather", "fog",
+                            "--out", str(tmp_path / "r.json"), *flag], capture_output=True, text=True)
+        assert p.returncode != 0
+        with pytest.raises(murk.InputError) as e:
+            murk.diagnose(CAMPAIGN, "fog", **kw)
+        assert f"murk: error: {e.value}" in p.stderr

@@ -57,6 +57,15 @@ pub struct Args {
     /// Box of the localised voxel difference: `xmin,ymin,zmin,xmax,ymax,zmax`.
     #[arg(long, value_delimiter = ',', num_args = 6)]
     pub local_box: Option<Vec<f64>>,
+    /// Megabytes of kept returns held in memory; the recordings beyond
+    /// spill theirs to an anonymous temporary file (same output; 0 spills
+    /// all).
+    #[arg(long, default_value_t = 256.0)]
+    pub kept_memory_mb: f64,
+    /// Folder of that temporary file (default: the system's temporary
+    /// folder; put it on a disk, not a RAM-backed /tmp).
+    #[arg(long)]
+    pub spill_dir: Option<PathBuf>,
 }
 
 /// Runs `murk diagnose`.
@@ -100,6 +109,8 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         .voxel_m(a.voxel)
         .local_box(local_box)
         .coefficients(table)
+        .kept_memory_mb(a.kept_memory_mb)
+        .spill_dir(a.spill_dir.clone())
         .check()?;
     let bar = super::spinner(format!(
         "diagnosing {weather} in {} ({} folds)",

@@ -246,10 +246,14 @@ def diagnose(
     voxel: float = 1.0,
     local_box: Optional[Sequence[float]] = None,
     threads: Optional[int] = None,
+    kept_memory_mb: float = 256.0,
+    spill_dir: Optional[PathLike] = None,
     extended_table: Literal[False] = False,
 ) -> Dict[str, Any]:
     """``murk diagnose CAMPAIGN --weather W``: the report (``murk diagnose``'s
-    JSON) as a dict; with ``extended_table=True`` also the extended table (or None)."""
+    JSON) as a dict; with ``extended_table=True`` also the extended table (or None).
+    ``kept_memory_mb``: megabytes of kept returns held in memory, the rest
+    spilled to an anonymous temporary file in ``spill_dir`` (same result)."""
 
 @overload
 def diagnose(
@@ -265,6 +269,8 @@ def diagnose(
     voxel: float = 1.0,
     local_box: Optional[Sequence[float]] = None,
     threads: Optional[int] = None,
+    kept_memory_mb: float = 256.0,
+    spill_dir: Optional[PathLike] = None,
     extended_table: Literal[True],
 ) -> Tuple[Dict[str, Any], Optional[Table]]: ...
 def set_num_threads(n: int) -> None:
