@@ -14,14 +14,16 @@
 //! byte. Delete `DIR` afterwards: 1,000 recordings are about 2 GB.
 //!
 //! `cargo build --workspace --release --examples`, then
-//! `target/release/examples/diagnose_bench DIR N [--vlp16] [--azimuth DEG] [--hide] [--keep]`
+//! `target/release/examples/diagnose_bench DIR N [--vlp16] [--azimuth DEG] [--hide] [--keep] [--kept-memory-mb MB]`
 //! (`--vlp16`: the small preset's VLP-16 instead; `--azimuth 0.09`: the
 //! HDL-64 fired every 0.09° instead of 0.2°, about 100 k points per scan
 //! as at 5 Hz, the campaign named `hdl64-0.09-N`; `--hide`: the campaign
 //! hides a survival effect (fog survival × elevation, a factor 0.8 on the
 //! vanishing distance below −10°), so that the run fits a survival term,
 //! the name ending in `-hide`; `--keep` keeps the campaign, which is
-//! otherwise removed after the run). The mean points
+//! otherwise removed after the run; `--kept-memory-mb`: the diagnosis's
+//! memory budget for kept returns, 256 by default, beyond which they spill
+//! to a temporary file — `inf` holds them all). The mean points
 //! per scan of the first recording is printed with the figures.
 
 use std::path::PathBuf;
@@ -45,12 +47,16 @@ fn status_mb(field: &str) -> Option<f64> {
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let usage = "usage: diagnose_bench DIR N [--vlp16] [--azimuth DEG] [--hide] [--keep]";
+    let usage = "usage: diagnose_bench DIR N [--vlp16] [--azimuth DEG] [--hide] [--keep] [--kept-memory-mb MB]";
     let dir: PathBuf = args.first().map(PathBuf::from).ok_or(usage)?;
     let n: usize = args.get(1).ok_or(usage)?.parse()?;
     let vlp16 = args.iter().any(|a| a == "--vlp16");
     let keep = args.iter().any(|a| a == "--keep");
     let hide = args.iter().any(|a| a == "--hide");
+    let kept_mb: f64 = match args.iter().position(|a| a == "--kept-memory-mb") {
+        Some(i) => args.get(i + 1).ok_or(usage)?.parse()?,
+        None => 256.0,
+    };
     let azimuth: Option<f64> = match args.iter().position(|a| a == "--azimuth") {
         Some(i) => Some(args.get(i + 1).ok_or(usage)?.parse()?),
         None => None,
@@ -114,6 +120,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let t = Instant::now();
     let d = DiagnoseParams::new(WeatherClass::Fog)
+        .kept_memory_mb(kept_mb)
         .check()?
         .run(&campaign)?;
     let secs = t.elapsed().as_secs_f64();
@@ -129,7 +136,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         rayon::current_num_threads()
     );
     println!(
-        "diagnose: {secs:.1} s, peak RSS {peak:.0} MB (before the run {before:.0} MB); {} steps, {} findings",
+        "diagnose: {secs:.1} s, peak RSS {peak:.0} MB (before the run {before:.0} MB, kept returns held up to {kept_mb} MB); {} steps, {} findings",
         d.report.steps.len(),
         d.report.findings.iter().filter(|f| f.significant).count()
     );

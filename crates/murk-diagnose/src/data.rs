@@ -185,9 +185,36 @@ pub struct Kept {
     pub reflectivity: f32,
 }
 
+/// The kept returns of one reference cell of a recording that kept
+/// [`SUM_FROM`] or more there (a `.pcap` of many revolutions keeps one per
+/// revolution): their count and the sums a residual needs, centred on the
+/// reference so the sums stay small. Every consumer of kept returns is a
+/// sum over them (means, mean squares, least squares, binned sums), so
+/// these are sufficient, at 40 bytes per cell instead of 12 per return.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct KeptCell {
+    /// Reference cell they paired with.
+    pub cell: u32,
+    /// Kept returns (≥ [`SUM_FROM`]).
+    pub n: u32,
+    /// Σ (measured range − the cell's reference range), metres.
+    pub range: f64,
+    /// Σ of its squares.
+    pub range_sq: f64,
+    /// Σ [`log_ratio`] (measured, the cell's reference reflectivity).
+    pub log_ratio: f64,
+    /// Σ of its squares.
+    pub log_ratio_sq: f64,
+}
+
 /// Bytes a [`Kept`] takes in memory and in a spill file (cell, range and
 /// reflectivity, little-endian).
 const KEPT_BYTES: usize = 12;
+/// Bytes a [`KeptCell`] takes (cell, count, four sums).
+const KEPT_CELL_BYTES: usize = 40;
+/// Returns of one cell from which they are held as a [`KeptCell`]: where 40
+/// bytes of sums take less than 12 per return.
+pub const SUM_FROM: usize = 4;
 
 /// The file the kept returns of a diagnosis spill to: an anonymous
 /// temporary file (unlinked at creation where the system allows, so a
@@ -259,98 +286,222 @@ impl SpillFile {
     }
 }
 
-/// A recording's kept returns: in memory, or in the diagnosis's
+/// A recording's kept returns: one [`Kept`] per return of a reference cell
+/// that kept fewer than [`SUM_FROM`], in pairing order, and one
+/// [`KeptCell`] per cell that kept more (their sums), so a recording holds
+/// at most 12 bytes per return and 40 per cell. Held in memory, or in the diagnosis's
 /// [`SpillFile`] (when the campaign's kept returns exceed the memory
 /// budget, `DiagnoseParams::kept_memory_mb`), read back by [`Self::get`].
-/// Either way the same returns in the same order, so a diagnosis gives
-/// the same bytes spilled or not.
+/// Either way the same values in the same order, so a diagnosis gives the
+/// same bytes spilled or not.
 #[derive(Debug, Clone)]
-pub struct KeptReturns(KeptStore);
+pub struct KeptReturns {
+    store: KeptStore,
+    /// Kept returns in all (listed ones and the cells' counts).
+    returns: usize,
+}
 
 #[derive(Debug, Clone)]
 enum KeptStore {
-    Memory(Vec<Kept>),
+    Memory(Vec<Kept>, Vec<KeptCell>),
     Spilled {
         file: std::sync::Arc<SpillFile>,
         offset: u64,
-        len: usize,
+        singles: usize,
+        cells: usize,
     },
+}
+
+/// A recording's kept returns as read: the returns listed one by one and
+/// the cells of many ([`KeptReturns`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct KeptView<'a> {
+    /// Returns of cells that kept fewer than [`SUM_FROM`], in pairing
+    /// order.
+    pub singles: std::borrow::Cow<'a, [Kept]>,
+    /// Cells of [`SUM_FROM`] kept returns or more, in cell order.
+    pub cells: std::borrow::Cow<'a, [KeptCell]>,
+}
+
+impl KeptView<'_> {
+    /// The view with its own copies.
+    pub fn into_owned(self) -> KeptView<'static> {
+        KeptView {
+            singles: std::borrow::Cow::Owned(self.singles.into_owned()),
+            cells: std::borrow::Cow::Owned(self.cells.into_owned()),
+        }
+    }
 }
 
 impl PartialEq for KeptReturns {
     fn eq(&self, other: &Self) -> bool {
-        match (&self.0, &other.0) {
-            (KeptStore::Memory(a), KeptStore::Memory(b)) => a == b,
-            (
-                KeptStore::Spilled { file, offset, len },
-                KeptStore::Spilled {
-                    file: f2,
-                    offset: o2,
-                    len: l2,
-                },
-            ) => std::sync::Arc::ptr_eq(file, f2) && offset == o2 && len == l2,
-            _ => false,
-        }
+        self.returns == other.returns
+            && match (&self.store, &other.store) {
+                (KeptStore::Memory(a, b), KeptStore::Memory(c, d)) => a == c && b == d,
+                (
+                    KeptStore::Spilled {
+                        file,
+                        offset,
+                        singles,
+                        cells,
+                    },
+                    KeptStore::Spilled {
+                        file: f2,
+                        offset: o2,
+                        singles: s2,
+                        cells: c2,
+                    },
+                ) => std::sync::Arc::ptr_eq(file, f2) && (offset, singles, cells) == (o2, s2, c2),
+                _ => false,
+            }
     }
 }
 
 impl KeptReturns {
-    /// Kept returns held in memory.
-    pub fn in_memory(kept: Vec<Kept>) -> KeptReturns {
-        KeptReturns(KeptStore::Memory(kept))
+    /// A recording's kept returns, in pairing order, held in memory: the
+    /// returns of a cell that kept fewer than [`SUM_FROM`] as they are,
+    /// those of a cell that kept more as the cell's sums, centred on `cells`' reference
+    /// range and reflectivity (every pair is with a reference cell).
+    pub fn new(kept: Vec<Kept>, cells: &[Option<CellInfo>]) -> KeptReturns {
+        let returns = kept.len();
+        let mut order: Vec<usize> = (0..kept.len()).collect();
+        // Stable: within a cell, pairing order.
+        order.sort_by_key(|&i| kept[i].cell);
+        let mut several = vec![false; kept.len()];
+        let mut sums = Vec::new();
+        for group in order.chunk_by(|&a, &b| kept[a].cell == kept[b].cell) {
+            if group.len() < SUM_FROM {
+                continue;
+            }
+            let cell = kept[group[0]].cell;
+            let info = cells[cell as usize]
+                .as_ref()
+                .expect("pairs are reference cells");
+            let mut s = KeptCell {
+                cell,
+                n: group.len() as u32,
+                range: 0.0,
+                range_sq: 0.0,
+                log_ratio: 0.0,
+                log_ratio_sq: 0.0,
+            };
+            for &i in group {
+                several[i] = true;
+                let d = kept[i].range as f64 - info.cov.range;
+                let l = log_ratio(kept[i].reflectivity as f64, info.cov.reflectivity);
+                s.range += d;
+                s.range_sq += d * d;
+                s.log_ratio += l;
+                s.log_ratio_sq += l * l;
+            }
+            sums.push(s);
+        }
+        let singles: Vec<Kept> = kept
+            .into_iter()
+            .zip(several)
+            .filter(|(_, s)| !s)
+            .map(|(k, _)| k)
+            .collect();
+        KeptReturns {
+            store: KeptStore::Memory(singles, sums),
+            returns,
+        }
     }
 
     /// Number of kept returns.
     pub fn len(&self) -> usize {
-        match &self.0 {
-            KeptStore::Memory(v) => v.len(),
-            KeptStore::Spilled { len, .. } => *len,
-        }
+        self.returns
     }
 
     /// Whether there is none.
     pub fn is_empty(&self) -> bool {
-        self.len() == 0
+        self.returns == 0
     }
 
     /// Whether they are in the spill file.
     pub fn is_spilled(&self) -> bool {
-        matches!(self.0, KeptStore::Spilled { .. })
+        matches!(self.store, KeptStore::Spilled { .. })
     }
 
-    /// Bytes they hold in memory.
+    /// Bytes they take, in memory or in the spill file (12 per listed
+    /// return, 40 per cell of sums).
+    pub fn bytes(&self) -> usize {
+        let (singles, cells) = match &self.store {
+            KeptStore::Memory(a, b) => (a.len(), b.len()),
+            KeptStore::Spilled { singles, cells, .. } => (*singles, *cells),
+        };
+        KEPT_BYTES * singles + KEPT_CELL_BYTES * cells
+    }
+
+    /// Bytes they hold in memory (0 once spilled).
     pub fn heap_bytes(&self) -> usize {
-        match &self.0 {
-            KeptStore::Memory(v) => KEPT_BYTES * v.capacity(),
+        match &self.store {
+            KeptStore::Memory(a, b) => {
+                std::mem::size_of::<Kept>() * a.capacity()
+                    + std::mem::size_of::<KeptCell>() * b.capacity()
+            }
             KeptStore::Spilled { .. } => 0,
         }
     }
 
-    /// The kept returns, in pairing order: borrowed from memory, or read
-    /// from the spill file. A failed read gives none and is latched (see
-    /// [`SpillFile`]).
-    pub fn get(&self) -> std::borrow::Cow<'_, [Kept]> {
-        match &self.0 {
-            KeptStore::Memory(v) => std::borrow::Cow::Borrowed(v),
-            KeptStore::Spilled { file, offset, len } => {
-                let mut buf = vec![0u8; len * KEPT_BYTES];
-                if let Err(e) = file.read_at(&mut buf, *offset) {
-                    file.latch(format!(
-                        "reading {len} kept returns back at byte {offset}: {e}"
-                    ));
-                    return std::borrow::Cow::Owned(Vec::new());
-                }
-                let word = |b: &[u8], i: usize| [b[i], b[i + 1], b[i + 2], b[i + 3]];
-                std::borrow::Cow::Owned(
-                    buf.chunks_exact(KEPT_BYTES)
-                        .map(|b| Kept {
-                            cell: u32::from_le_bytes(word(b, 0)),
-                            range: f32::from_le_bytes(word(b, 4)),
-                            reflectivity: f32::from_le_bytes(word(b, 8)),
-                        })
-                        .collect(),
-                )
+    /// The kept returns: borrowed from memory, or read from the spill
+    /// file. A failed read gives none and is latched (see [`SpillFile`]).
+    pub fn get(&self) -> KeptView<'_> {
+        use std::borrow::Cow;
+        let (file, offset, singles, cells) = match &self.store {
+            KeptStore::Memory(a, b) => {
+                return KeptView {
+                    singles: Cow::Borrowed(a),
+                    cells: Cow::Borrowed(b),
+                };
             }
+            KeptStore::Spilled {
+                file,
+                offset,
+                singles,
+                cells,
+            } => (file, *offset, *singles, *cells),
+        };
+        let mut buf = vec![0u8; singles * KEPT_BYTES + cells * KEPT_CELL_BYTES];
+        if let Err(e) = file.read_at(&mut buf, offset) {
+            file.latch(format!(
+                "reading {} kept returns back at byte {offset}: {e}",
+                self.returns
+            ));
+            return KeptView {
+                singles: Cow::Owned(Vec::new()),
+                cells: Cow::Owned(Vec::new()),
+            };
+        }
+        let w4 = |b: &[u8], i: usize| [b[i], b[i + 1], b[i + 2], b[i + 3]];
+        let f8 = |b: &[u8], i: usize| {
+            let mut w = [0u8; 8];
+            w.copy_from_slice(&b[i..i + 8]);
+            f64::from_le_bytes(w)
+        };
+        let (a, b) = buf.split_at(singles * KEPT_BYTES);
+        KeptView {
+            singles: Cow::Owned(
+                a.chunks_exact(KEPT_BYTES)
+                    .map(|b| Kept {
+                        cell: u32::from_le_bytes(w4(b, 0)),
+                        range: f32::from_le_bytes(w4(b, 4)),
+                        reflectivity: f32::from_le_bytes(w4(b, 8)),
+                    })
+                    .collect(),
+            ),
+            cells: Cow::Owned(
+                b.chunks_exact(KEPT_CELL_BYTES)
+                    .map(|b| KeptCell {
+                        cell: u32::from_le_bytes(w4(b, 0)),
+                        n: u32::from_le_bytes(w4(b, 4)),
+                        range: f8(b, 8),
+                        range_sq: f8(b, 16),
+                        log_ratio: f8(b, 24),
+                        log_ratio_sq: f8(b, 32),
+                    })
+                    .collect(),
+            ),
         }
     }
 
@@ -362,14 +513,21 @@ impl KeptReturns {
         end: &mut u64,
     ) -> Result<(), DiagnoseError> {
         use std::io::Write;
-        let KeptStore::Memory(v) = &self.0 else {
+        let KeptStore::Memory(a, b) = &self.store else {
             return Ok(());
         };
-        let mut buf = Vec::with_capacity(v.len() * KEPT_BYTES);
-        for k in v {
+        let mut buf = Vec::with_capacity(self.bytes());
+        for k in a {
             buf.extend_from_slice(&k.cell.to_le_bytes());
             buf.extend_from_slice(&k.range.to_le_bytes());
             buf.extend_from_slice(&k.reflectivity.to_le_bytes());
+        }
+        for c in b {
+            buf.extend_from_slice(&c.cell.to_le_bytes());
+            buf.extend_from_slice(&c.n.to_le_bytes());
+            for x in [c.range, c.range_sq, c.log_ratio, c.log_ratio_sq] {
+                buf.extend_from_slice(&x.to_le_bytes());
+            }
         }
         (&file.file)
             .write_all(&buf)
@@ -377,11 +535,11 @@ impl KeptReturns {
                 path: file.dir.clone(),
                 reason: format!("cannot write kept returns to the spill file there: {e}"),
             })?;
-        let len = v.len();
-        self.0 = KeptStore::Spilled {
+        self.store = KeptStore::Spilled {
             file: std::sync::Arc::clone(file),
             offset: *end,
-            len,
+            singles: a.len(),
+            cells: b.len(),
         };
         *end += buf.len() as u64;
         Ok(())
@@ -862,7 +1020,7 @@ pub fn load_with(
                 }
             })
             .collect();
-        let kept = KeptReturns::in_memory(kept);
+        let kept = KeptReturns::new(kept, &cells);
         let rec = campaign
             .recording(&r.id)
             .ok_or_else(|| DiagnoseError::Campaign {
@@ -919,7 +1077,7 @@ pub fn load_with(
         let read: Vec<Result<Rec, DiagnoseError>> = chunk.par_iter().map(load_one).collect();
         for r in read {
             let mut r = r?;
-            let bytes = (KEPT_BYTES * r.kept.len()) as u64;
+            let bytes = r.kept.bytes() as u64;
             if held.saturating_add(bytes) > memory.budget_bytes {
                 let file = match &spill {
                     Some(f) => f,
@@ -953,56 +1111,147 @@ pub fn load_with(
 mod tests {
     use super::*;
 
+    /// Reference cells 0..8 at 10 m + cell, reflectivity 20 + cell.
+    fn cells() -> Vec<Option<CellInfo>> {
+        (0..8)
+            .map(|c| {
+                Some(CellInfo {
+                    hits: 1,
+                    cov: PointCovariates {
+                        range: 10.0 + c as f64,
+                        reflectivity: 20.0 + c as f64,
+                        ring: 0,
+                        elevation: 0.0,
+                        azimuth: 0.0,
+                    },
+                    clear_range_offset: 0.0,
+                    clear_log_reflectivity_offset: 0.0,
+                })
+            })
+            .collect()
+    }
+
+    fn kept(cell: u32, range: f32, reflectivity: f32) -> Kept {
+        Kept {
+            cell,
+            range,
+            reflectivity,
+        }
+    }
+
+    #[test]
+    fn a_cell_of_four_returns_or_more_is_summed_and_the_rest_listed_in_order() {
+        let cells = cells();
+        // Cell 3 keeps four returns (interleaved with others), cell 5 two:
+        // cell 3's are summed, cell 5's listed (two take 24 bytes, sums 40).
+        let v = vec![
+            kept(6, 16.1, 26.0),
+            kept(3, 13.2, 24.0),
+            kept(5, 14.9, 25.0),
+            kept(1, 11.0, 21.5),
+            kept(3, 12.9, 22.0),
+            kept(5, 15.0, 0.1),
+            kept(3, 13.0, 23.0),
+            kept(3, 13.1, 0.2),
+        ];
+        let k = KeptReturns::new(v, &cells);
+        assert_eq!(k.len(), 8);
+        assert_eq!(k.bytes(), 4 * 12 + 40);
+        let g = k.get();
+        assert_eq!(
+            &*g.singles,
+            &[
+                kept(6, 16.1, 26.0),
+                kept(5, 14.9, 25.0),
+                kept(1, 11.0, 21.5),
+                kept(5, 15.0, 0.1)
+            ]
+        );
+        assert_eq!(g.cells.len(), 1);
+        let c3 = g.cells[0];
+        assert_eq!((c3.cell, c3.n), (3, 4));
+        let d: Vec<f64> = [13.2f32, 12.9, 13.0, 13.1]
+            .iter()
+            .map(|&r| r as f64 - 13.0)
+            .collect();
+        assert!((c3.range - d.iter().sum::<f64>()).abs() < 1e-12);
+        assert!((c3.range_sq - d.iter().map(|x| x * x).sum::<f64>()).abs() < 1e-12);
+        // The floor of the log ratio holds inside the sums too (0.2).
+        let l: Vec<f64> = [24.0, 22.0, 23.0, 0.2]
+            .iter()
+            .map(|&x| log_ratio(x, 23.0))
+            .collect();
+        assert_eq!(l[3], REFLECTIVITY_FLOOR.ln() - 23f64.ln());
+        assert!((c3.log_ratio - l.iter().sum::<f64>()).abs() < 1e-12);
+        assert!((c3.log_ratio_sq - l.iter().map(|x| x * x).sum::<f64>()).abs() < 1e-12);
+    }
+
     #[test]
     fn spilled_returns_come_back_and_a_failed_read_is_latched() {
         let dir = tempfile::tempdir().unwrap();
         let file = std::sync::Arc::new(SpillFile::create(Some(dir.path())).unwrap());
+        let cells = cells();
         let a: Vec<Kept> = (0..5)
-            .map(|i| Kept {
-                cell: 1000 * i,
-                range: 1.5 + i as f32 / 3.0,
-                reflectivity: f32::from_bits(0x3f80_0001 + i),
-            })
+            .map(|i| kept(i, 10.5 + i as f32 / 3.0, f32::from_bits(0x41a0_0001 + i)))
+            .chain((0..4).map(|i| kept(7, 17.0 + i as f32 / 8.0, 30.0 + i as f32)))
             .collect();
-        let b = vec![Kept {
-            cell: u32::MAX,
-            range: f32::MIN_POSITIVE,
-            reflectivity: -0.0,
-        }];
+        let b = vec![kept(2, f32::MIN_POSITIVE, -0.0)];
         let mut end = 0;
         let (mut ka, mut kb) = (
-            KeptReturns::in_memory(a.clone()),
-            KeptReturns::in_memory(b.clone()),
+            KeptReturns::new(a.clone(), &cells),
+            KeptReturns::new(b.clone(), &cells),
         );
+        let (ga, gb) = (ka.get().into_owned(), kb.get().into_owned());
+        assert_eq!((ga.singles.len(), ga.cells.len()), (5, 1));
         ka.spill(&file, &mut end).unwrap();
         kb.spill(&file, &mut end).unwrap();
-        assert_eq!(end, 12 * 6);
+        assert_eq!(end, (5 * 12 + 40 + 12) as u64);
         assert!(ka.is_spilled() && kb.is_spilled());
-        assert_eq!((ka.len(), kb.len(), ka.heap_bytes()), (5, 1, 0));
-        let bits = |v: &[Kept]| -> Vec<(u32, u32, u32)> {
-            v.iter()
-                .map(|k| (k.cell, k.range.to_bits(), k.reflectivity.to_bits()))
-                .collect()
+        assert_eq!((ka.len(), kb.len(), ka.heap_bytes()), (9, 1, 0));
+        assert_eq!(ka.bytes(), 5 * 12 + 40);
+        type Bits = (Vec<(u32, u32, u32)>, Vec<(u32, u32, [u64; 4])>);
+        let bits = |v: &KeptView<'_>| -> Bits {
+            (
+                v.singles
+                    .iter()
+                    .map(|k| (k.cell, k.range.to_bits(), k.reflectivity.to_bits()))
+                    .collect(),
+                v.cells
+                    .iter()
+                    .map(|c| {
+                        (
+                            c.cell,
+                            c.n,
+                            [c.range, c.range_sq, c.log_ratio, c.log_ratio_sq].map(f64::to_bits),
+                        )
+                    })
+                    .collect(),
+            )
         };
-        assert_eq!(bits(&ka.get()), bits(&a));
-        assert_eq!(bits(&kb.get()), bits(&b));
+        assert_eq!(bits(&ka.get()), bits(&ga));
+        assert_eq!(bits(&kb.get()), bits(&gb));
         // Spilling again leaves them where they are.
         ka.spill(&file, &mut end).unwrap();
-        assert_eq!(end, 12 * 6);
+        assert_eq!(end, (5 * 12 + 40 + 12) as u64);
         // A read past the file's end: none, and the error is latched.
-        let beyond = KeptReturns(KeptStore::Spilled {
-            file: std::sync::Arc::clone(&file),
-            offset: 12 * 6,
-            len: 2,
-        });
-        assert!(beyond.get().is_empty());
+        let beyond = KeptReturns {
+            store: KeptStore::Spilled {
+                file: std::sync::Arc::clone(&file),
+                offset: end,
+                singles: 2,
+                cells: 0,
+            },
+            returns: 2,
+        };
+        let g = beyond.get();
+        assert!(g.singles.is_empty() && g.cells.is_empty());
         let msg = file.error().unwrap();
         assert!(
-            msg.contains("reading 2 kept returns back at byte 72"),
+            msg.contains("reading 2 kept returns back at byte 112"),
             "{msg}"
         );
         // Later reads still work; the first error stays.
-        assert_eq!(bits(&kb.get()), bits(&b));
+        assert_eq!(bits(&kb.get()), bits(&gb));
         assert_eq!(file.error().unwrap(), msg);
     }
 

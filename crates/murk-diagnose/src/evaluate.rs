@@ -62,8 +62,8 @@ pub struct SimOptions {
 /// probability per reference cell, a range and an intensity residual per
 /// kept return, megabytes per recording) are computed again from the
 /// recording's per-cell summaries each time they are read ([`RecEval::p`],
-/// [`RecEval::range_residuals`], [`RecEval::intensity_residuals`]), bit for
-/// bit as the evaluation would have held them, so a diagnosis's memory does
+/// [`RecEval::kept_residuals`]), bit for bit as the evaluation would have
+/// held them, so a diagnosis's memory does
 /// not grow with the evaluation sets it keeps.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RecEval {
@@ -85,14 +85,52 @@ pub struct RecEval {
     pub scene: Option<SceneMetrics>,
 }
 
+/// The residuals of the kept returns of one reference cell of a recording
+/// ([`RecEval::kept_residuals`]): `n` returns (1 for a return alone in its
+/// cell), the sum of their residuals and of their squares. Everything
+/// computed from kept returns is a sum of these.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct KeptUnit {
+    /// Reference cell.
+    pub cell: u32,
+    /// Kept returns.
+    pub n: f64,
+    /// Σ residual.
+    pub sum: f64,
+    /// Σ residual².
+    pub sum_sq: f64,
+}
+
+impl KeptUnit {
+    /// The unit of `n` returns whose centred values `x` sum to `d` (their
+    /// squares to `d2`) when each residual is `x − a`: `Σ(x − a) = d − n·a`,
+    /// `Σ(x − a)² = d2 − 2a·d + n·a²` (the values are centred on the
+    /// reference, so `a`, `d/n` and the residuals are all small and the
+    /// difference loses nothing that matters).
+    pub fn of_sums(cell: u32, n: u32, d: f64, d2: f64, a: f64) -> KeptUnit {
+        let n = n as f64;
+        KeptUnit {
+            cell,
+            n,
+            sum: d - n * a,
+            sum_sq: (d2 - 2.0 * a * d + n * a * a).max(0.0),
+        }
+    }
+
+    /// Mean residual.
+    pub fn mean(&self) -> f64 {
+        self.sum / self.n
+    }
+}
+
 /// A kept return's range residual given the table's range extension
-/// `bias` ([`RecEval::range_residuals`]).
+/// `bias` ([`RecEval::kept_residuals`]).
 fn range_residual(k: &Kept, c: &CellInfo, bias: f64) -> f64 {
     k.range as f64 - c.cov.range - c.clear_range_offset - bias
 }
 
 /// A kept return's intensity residual given the table's intensity factor
-/// `fac` ([`RecEval::intensity_residuals`]).
+/// `fac` ([`RecEval::kept_residuals`]).
 fn intensity_residual(k: &Kept, c: &CellInfo, fac: f64) -> f64 {
     log_ratio(k.reflectivity as f64, c.cov.reflectivity)
         - c.clear_log_reflectivity_offset
@@ -124,65 +162,55 @@ impl RecEval {
             .collect()
     }
 
-    /// Range residual per kept return, metres (aligned with `Rec::kept`):
-    /// measured range less the reference cell's, less what pairing gives
-    /// the cell in clear weather, less the table's range extension.
-    pub fn range_residuals(&self, loaded: &Loaded) -> Vec<f64> {
-        self.per_kept(loaded, ExtensionObservable::Range, range_residual)
-    }
-
-    /// Intensity log-ratio residual per kept return (aligned with
-    /// `Rec::kept`): log ratio of measured to reference reflectivity, less
-    /// the clear-weather offset, less the log of the table's intensity
-    /// factor.
-    pub fn intensity_residuals(&self, loaded: &Loaded) -> Vec<f64> {
-        self.per_kept(loaded, ExtensionObservable::Intensity, intensity_residual)
-    }
-
-    /// `residual(kept return, its reference cell, the table's extension of
-    /// `obs` there)` per kept return of the recording.
-    fn per_kept(
-        &self,
-        loaded: &Loaded,
-        obs: ExtensionObservable,
-        residual: impl Fn(&Kept, &CellInfo, f64) -> f64,
-    ) -> Vec<f64> {
-        self.per_kept_cells(loaded, obs, residual)
-            .into_iter()
-            .map(|(_, r)| r)
-            .collect()
-    }
-
-    /// [`Self::per_kept`] with each return's reference cell (the kept
-    /// returns are read once, from memory or the spill file).
-    fn per_kept_cells(
-        &self,
-        loaded: &Loaded,
-        obs: ExtensionObservable,
-        residual: impl Fn(&Kept, &CellInfo, f64) -> f64,
-    ) -> Vec<(u32, f64)> {
+    /// The range (`Range`) or intensity (`Intensity`) residuals of the
+    /// recording's kept returns, as [`KeptUnit`]s: one per return alone in
+    /// its reference cell (in pairing order), then one per cell that kept
+    /// several (their sums). A range residual is the measured range less
+    /// the reference cell's, less what pairing gives the cell in clear
+    /// weather, less the table's range extension; an intensity residual the
+    /// log ratio of measured to reference reflectivity, less the
+    /// clear-weather offset, less the log of the table's intensity factor.
+    pub fn kept_residuals(&self, loaded: &Loaded, obs: ExtensionObservable) -> Vec<KeptUnit> {
         let rec = &loaded.recs[self.rec];
-        rec.kept
-            .get()
-            .iter()
-            .map(|k| {
-                let c = loaded.cells[k.cell as usize]
-                    .as_ref()
-                    .expect("pairs are reference cells");
-                let ext = extension_value(&self.table, loaded, obs, &c.cov, &rec.scan, rec.mor);
-                (k.cell, residual(k, c, ext))
-            })
-            .collect()
-    }
-
-    /// The range (`Range`) or intensity (`Intensity`) residuals, each with
-    /// its kept return's reference cell.
-    pub fn kept_residuals(&self, loaded: &Loaded, obs: ExtensionObservable) -> Vec<(u32, f64)> {
-        if obs == ExtensionObservable::Range {
-            self.per_kept_cells(loaded, obs, range_residual)
-        } else {
-            self.per_kept_cells(loaded, obs, intensity_residual)
+        let kept = rec.kept.get();
+        let info = |c: u32| {
+            loaded.cells[c as usize]
+                .as_ref()
+                .expect("pairs are reference cells")
+        };
+        let ext =
+            |c: &CellInfo| extension_value(&self.table, loaded, obs, &c.cov, &rec.scan, rec.mor);
+        let range = obs == ExtensionObservable::Range;
+        let mut out = Vec::with_capacity(kept.singles.len() + kept.cells.len());
+        for k in kept.singles.iter() {
+            let c = info(k.cell);
+            let e = if range {
+                range_residual(k, c, ext(c))
+            } else {
+                intensity_residual(k, c, ext(c))
+            };
+            out.push(KeptUnit {
+                cell: k.cell,
+                n: 1.0,
+                sum: e,
+                sum_sq: e * e,
+            });
         }
+        for s in kept.cells.iter() {
+            let c = info(s.cell);
+            // Each return's residual is its centred value less `a`.
+            let (a, d, d2) = if range {
+                (c.clear_range_offset + ext(c), s.range, s.range_sq)
+            } else {
+                (
+                    c.clear_log_reflectivity_offset + ext(c).max(1e-6).ln(),
+                    s.log_ratio,
+                    s.log_ratio_sq,
+                )
+            };
+            out.push(KeptUnit::of_sums(s.cell, s.n, d, d2, a));
+        }
+        out
     }
 
     /// Survival residuals `kept/trials − p` with their weights.
@@ -552,13 +580,16 @@ impl Metrics {
                     tr += n;
                 }
                 let mut kept = [0.0f64; 5];
-                let (range, intensity) = (e.range_residuals(loaded), e.intensity_residuals(loaded));
-                for (&r, &i) in range.iter().zip(&intensity) {
-                    kept[0] += r;
-                    kept[1] += r * r;
-                    kept[2] += i;
-                    kept[3] += i * i;
-                    kept[4] += 1.0;
+                let (range, intensity) = (
+                    e.kept_residuals(loaded, ExtensionObservable::Range),
+                    e.kept_residuals(loaded, ExtensionObservable::Intensity),
+                );
+                for (r, i) in range.iter().zip(&intensity) {
+                    kept[0] += r.sum;
+                    kept[1] += r.sum_sq;
+                    kept[2] += i.sum;
+                    kept[3] += i.sum_sq;
+                    kept[4] += r.n;
                 }
                 let units = e.count_bin_residuals(loaded, rec);
                 Part {
@@ -662,5 +693,29 @@ impl Metrics {
             ExtensionObservable::Range => ("range_rmse_m", Some(self.range_rmse_m)),
             ExtensionObservable::Intensity => ("intensity_rmse", Some(self.intensity_rmse)),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_cell_of_several_returns_gives_the_sums_of_their_residuals() {
+        // Centred ranges of four returns of one cell; residual x − a.
+        let x = [0.031, -0.012, 0.004, 0.027];
+        let a = 0.0125;
+        let d: f64 = x.iter().sum();
+        let d2: f64 = x.iter().map(|v| v * v).sum();
+        let u = KeptUnit::of_sums(7, 4, d, d2, a);
+        let sum: f64 = x.iter().map(|v| v - a).sum();
+        let sum_sq: f64 = x.iter().map(|v| (v - a) * (v - a)).sum();
+        assert_eq!((u.cell, u.n), (7, 4.0));
+        assert!((u.sum - sum).abs() < 1e-15, "{} {sum}", u.sum);
+        assert!((u.sum_sq - sum_sq).abs() < 1e-15, "{} {sum_sq}", u.sum_sq);
+        assert!((u.mean() - sum / 4.0).abs() < 1e-15);
+        // Equal values: the sum of squares is 0, not a rounding below it.
+        let u = KeptUnit::of_sums(1, 3, 0.3, 0.03, 0.1);
+        assert!(u.sum_sq >= 0.0 && u.sum_sq < 1e-15, "{}", u.sum_sq);
     }
 }

@@ -62,7 +62,7 @@ use murk_types::{
 use crate::DiagnoseError;
 use crate::attribution::Binning;
 use crate::data::Loaded;
-use crate::evaluate::{P_FLOOR, RecEval, applier, extension_value};
+use crate::evaluate::{KeptUnit, P_FLOOR, RecEval, applier, extension_value};
 
 /// Fewest returns for a bin of its own.
 pub const MIN_TRIALS: f64 = 50.0;
@@ -320,12 +320,12 @@ fn fit_bins(
             let mut s = vec![(0.0f64, 0.0f64); nb];
             for e in evals {
                 let rec = &loaded.recs[e.rec];
-                for (k, r) in e.kept_residuals(loaded, observable) {
-                    let cov = &cell(k).cov;
+                for u in e.kept_residuals(loaded, observable) {
+                    let cov = &cell(u.cell).cov;
                     if let Some(b) = bin_of(binning, covariate, cov, &rec.scan) {
-                        s[b].0 += r;
-                        s[b].1 += 1.0;
-                        xsum[b] += x_of(covariate, cov, &rec.scan).unwrap_or(f64::NAN);
+                        s[b].0 += u.sum;
+                        s[b].1 += u.n;
+                        xsum[b] += u.n * x_of(covariate, cov, &rec.scan).unwrap_or(f64::NAN);
                     }
                 }
             }
@@ -1055,34 +1055,35 @@ fn fit_parametric(
     ) {
         return Ok(None);
     }
-    // (recording, x, MOR, residual) of every kept return with a numeric x.
+    // (recording, x, MOR, unit) of every kept unit with a numeric x (a unit
+    // is a return, or a cell's returns summed: every fit below is a sum).
     let cell = |c: u32| loaded.cells[c as usize].expect("reference cell");
-    let mut pts: Vec<(usize, f64, f64, f64)> = Vec::new();
+    let mut pts: Vec<(usize, f64, f64, KeptUnit)> = Vec::new();
     for (ri, e) in evals.iter().enumerate() {
         let rec = &loaded.recs[e.rec];
-        for (k, r) in e.kept_residuals(loaded, observable) {
-            if let Some(x) = x_of(covariate, &cell(k).cov, &rec.scan) {
-                pts.push((ri, x, rec.mor, r));
+        for u in e.kept_residuals(loaded, observable) {
+            if let Some(x) = x_of(covariate, &cell(u.cell).cov, &rec.scan) {
+                pts.push((ri, x, rec.mor, u));
             }
         }
     }
     if pts.is_empty() {
         return Ok(None);
     }
-    let mean_r = pts.iter().map(|p| p.3).sum::<f64>() / pts.len() as f64;
+    let mean_r = pts.iter().map(|p| p.3.sum).sum::<f64>() / pts.iter().map(|p| p.3.n).sum::<f64>();
     let intensity = observable == ExtensionObservable::Intensity;
     let default = if intensity { mean_r.exp() } else { mean_r };
     // Least squares on a regressor u per point.
     let lines = |u: &dyn Fn(f64, f64) -> Option<f64>| -> Vec<LineSums> {
         let mut per = vec![[0.0; 5]; n];
-        for &(ri, x, mor, r) in &pts {
+        for &(ri, x, mor, k) in &pts {
             if let Some(u) = u(x, mor).filter(|u| u.is_finite()) {
                 let s = &mut per[ri];
-                s[0] += 1.0;
-                s[1] += u;
-                s[2] += u * u;
-                s[3] += r;
-                s[4] += u * r;
+                s[0] += k.n;
+                s[1] += k.n * u;
+                s[2] += k.n * u * u;
+                s[3] += k.sum;
+                s[4] += u * k.sum;
             }
         }
         per
@@ -1147,21 +1148,21 @@ fn fit_parametric(
         (Shape::Power, false) => {
             // r = a·x^b: `a` in closed form for each `b`, `b` by
             // golden-section search on the squares.
-            let pos: Vec<(f64, f64)> = pts
+            let pos: Vec<(f64, KeptUnit)> = pts
                 .iter()
                 .filter(|p| p.1 > 0.0)
                 .map(|p| (p.1.ln(), p.3))
                 .collect();
-            if pos.len() < 2 {
+            if pos.iter().map(|p| p.1.n).sum::<f64>() < 2.0 {
                 return Ok(None);
             }
             let a_of = |b: f64| -> (f64, f64) {
                 let (mut sxy, mut sxx, mut syy) = (0.0, 0.0, 0.0);
-                for &(l, r) in &pos {
+                for &(l, k) in &pos {
                     let z = (b * l).exp();
-                    sxy += z * r;
-                    sxx += z * z;
-                    syy += r * r;
+                    sxy += z * k.sum;
+                    sxx += k.n * z * z;
+                    syy += k.sum_sq;
                 }
                 if sxx > 0.0 {
                     (sxy / sxx, syy - sxy * sxy / sxx)

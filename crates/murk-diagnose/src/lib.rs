@@ -294,7 +294,7 @@ impl Relevance {
 /// | `point_bins` | 12 | quantile bins of continuous point covariates |
 /// | `scan_bins` | 4 | quantile bins of continuous scan covariates |
 /// | `detectable` | true | compute each test's minimum detectable effect ([`power`]) |
-/// | `kept_memory_mb` | 256 | megabytes of kept returns (12 bytes each) held in memory; the recordings beyond spill them to an anonymous temporary file, read back by each pass ([`data::KeptMemory`]; the output is the same bytes) |
+/// | `kept_memory_mb` | 256 | megabytes of kept returns (12 bytes each; a cell's four or more, as in a `.pcap`, 40 bytes for their sums) held in memory; the recordings beyond spill them to an anonymous temporary file, read back by each pass ([`data::KeptMemory`]; the output is the same bytes) |
 /// | `spill_dir` | the system's temporary folder | folder of that file (put it on a disk, not a RAM-backed `/tmp`) |
 #[derive(Debug, Clone)]
 pub struct DiagnoseParams {
@@ -582,11 +582,11 @@ fn residuals(loaded: &Loaded, evals: &[RecEval]) -> Residuals {
         for obs in [Range, Intensity] {
             let res = e.kept_residuals(loaded, obs);
             let v = cell_counts.entry(obs).or_insert_with(|| vec![0; cells]);
-            for (k, _) in &res {
-                v[*k as usize] += 1;
+            for u in &res {
+                v[u.cell as usize] += u.n as u64;
             }
-            let m = (!res.is_empty())
-                .then(|| res.iter().map(|(_, r)| r).sum::<f64>() / res.len() as f64);
+            let n: f64 = res.iter().map(|u| u.n).sum();
+            let m = (n > 0.0).then(|| res.iter().map(|u| u.sum).sum::<f64>() / n);
             scans.entry(obs).or_default().push(m);
         }
         scans.entry(Count).or_default().push(e.count_residual(rec));
@@ -654,7 +654,7 @@ fn recording_units<'a>(
         ExtensionObservable::Range | ExtensionObservable::Intensity => Box::new(
             e.kept_residuals(loaded, obs)
                 .into_iter()
-                .map(move |(k, r)| (i, cov(k), r, 1.0)),
+                .map(move |u| (i, cov(u.cell), u.mean(), u.n)),
         ),
         ExtensionObservable::Count => Box::new(
             e.count_bin_residuals(loaded, rec)

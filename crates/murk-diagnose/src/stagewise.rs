@@ -79,8 +79,10 @@ pub fn recording_loss_of(
 /// intensity), |log count ratio| (count). `None` without data.
 pub fn recording_loss(loaded: &Loaded, e: &RecEval, obs: ExtensionObservable) -> Option<f64> {
     let rec = &loaded.recs[e.rec];
-    let mean_sq =
-        |v: &[f64]| (!v.is_empty()).then(|| v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64);
+    let mean_sq = |v: &[crate::evaluate::KeptUnit]| {
+        let n: f64 = v.iter().map(|u| u.n).sum();
+        (n > 0.0).then(|| v.iter().map(|u| u.sum_sq).sum::<f64>() / n)
+    };
     match obs {
         ExtensionObservable::Survival => {
             let (mut ll, mut n) = (0.0, 0.0);
@@ -92,8 +94,9 @@ pub fn recording_loss(loaded: &Loaded, e: &RecEval, obs: ExtensionObservable) ->
             }
             (n > 0.0).then(|| ll / n)
         }
-        ExtensionObservable::Range => mean_sq(&e.range_residuals(loaded)),
-        ExtensionObservable::Intensity => mean_sq(&e.intensity_residuals(loaded)),
+        ExtensionObservable::Range | ExtensionObservable::Intensity => {
+            mean_sq(&e.kept_residuals(loaded, obs))
+        }
         ExtensionObservable::Count => e.count_residual(rec).map(f64::abs),
     }
 }
