@@ -26,8 +26,13 @@ fn fit(path: &Path, replicates: u32) -> FittedTable {
 }
 
 fn fit_binned(path: &Path, replicates: u32, mor_bin_m: f64) -> FittedTable {
+    fit_banded(path, replicates, mor_bin_m, vec![0.0, 10.0])
+}
+
+fn fit_banded(path: &Path, replicates: u32, mor_bin_m: f64, band_edges: Vec<f64>) -> FittedTable {
     let campaign = Campaign::open(path).unwrap();
     FitParams::default()
+        .band_edges(band_edges)
         .bootstrap_replicates(replicates)
         .mor_bin_width_m(mor_bin_m)
         .apply_bend(true)
@@ -88,11 +93,12 @@ fn physics_cfg() -> SemiRealConfig {
 /// optima 0.01–0.02 away and happened to put 39–40 bins within 5 %; the
 /// maximum of the likelihood puts 37 there, so the bound below is 70 %,
 /// not the three quarters it was.
-/// The misses sit where the real scene has gaps in range (its 50 %
-/// crossing is only bracketed there, by the data and the truth alike) and
-/// in bins of one to six recordings, where a two-parameter law over every
-/// MOR cannot follow each bin. So this test holds every bin to 15 % and
-/// 70 % of them to 5 %.
+/// The misses are where the scene's mix of reflectivities within a band
+/// changes with range (see the next test: with narrower bands the bent
+/// law meets the truth of the bands' reflectivities in 128 of 130 bins),
+/// a few where the scene has gaps in range (its 50 % crossing is only
+/// bracketed there, by the data and the truth alike). So this test holds
+/// every bin to 15 % and 70 % of them to 5 %.
 #[test]
 fn physics_fog_bends_and_the_bent_law_meets_the_truth_in_every_bin() {
     let Some(capture) = capture() else {
@@ -220,6 +226,106 @@ fn physics_fog_bends_and_the_bent_law_meets_the_truth_in_every_bin() {
     assert!(
         closer * 4 >= bins * 3,
         "the law nearer than the line in {closer} of {bins}"
+    );
+}
+
+/// Why the seed's two bands miss bins: within a band a law has one
+/// vanishing distance, while the physics gives each return its own by its
+/// reflectivity (`γ` ∝ reflectivity), and the band `[10, ∞)` spans 10–255.
+/// The scene's curve mixes whatever reflectivities sit at each range, so it
+/// jumps where the mix changes (high band, seed 1: 7.68 m at MOR 7.4, 8.90
+/// at 10.7, 12.05 at 13.3), and no law of MOR alone follows it.
+///
+/// With bands narrow enough that a band's reflectivities reach about alike
+/// (`[0, 10)`, `[10, 20)`, `[20, 40)`, `[40, 80)`, `[80, ∞)`), each band's
+/// bent law is checked against the truth of its own reflectivities without
+/// the scene's arrangement: the median of their 50 %-survival ranges
+/// ([`PhysicsFog::band_half_survival_range_m`], the 50 % point of the
+/// band's survival curve when reflectivity does not depend on range).
+/// Measured (seeds 1–3, 130 covered bins): 128 within 5 %, worst 5.8 %
+/// (with 200 bootstrap replicates, 126 of 128); the same fits against the
+/// scene's curve put 84 of 128 within 5 %, the
+/// misses where a narrow band's few far returns leave gaps of 15–33 % in
+/// range around the crossing (the scene truth is only bracketed there).
+/// With the two bands the same comparison puts 35 of 52 within 5 % (worst
+/// 8.1 %: the high band's law 5–8 % short of its reflectivities' median,
+/// its fit pulled by where the scene puts them). So the law that bends has
+/// the physics' shape; what two bands cannot have is one distance for a
+/// 25-fold range of reflectivity. This test holds 95 % of the narrow
+/// bands' bins to 5 % and all to 8 %.
+#[test]
+fn physics_fog_with_narrow_bands_meets_the_truth_of_their_reflectivities() {
+    let Some(capture) = capture() else {
+        return;
+    };
+    let phys = PhysicsFog::default();
+    let scene = clear_scene(&capture, 10);
+    let (mut bins, mut within, mut worst) = (0usize, 0usize, 0f64);
+    let mut failures = Vec::new();
+    for seed in [1u64, 2, 3] {
+        let dir = tempfile::tempdir().unwrap();
+        semi_real::vlp16_campaign(&capture, dir.path(), &physics_cfg(), seed).unwrap();
+        let t = fit_banded(
+            dir.path(),
+            0,
+            PHYSICS_MOR_BIN_M,
+            vec![0.0, 10.0, 20.0, 40.0, 80.0],
+        );
+        let fog = &t.table().weathers[&WeatherClass::Fog];
+        let choice = fog.law_choice.as_ref().expect("a law choice");
+        assert_eq!(choice.chosen, "power", "seed {seed}: {choice:?}");
+        for b in &fog.vanishing_slope {
+            if b.slope.is_none() {
+                continue;
+            }
+            let reflectivities: Vec<f64> = scene
+                .iter()
+                .flat_map(|c| {
+                    (0..c.len())
+                        .map(move |i| c.intensity_scale.to_calibrated(c.intensity[i]) as f64)
+                })
+                .filter(|x| b.contains(*x))
+                .collect();
+            for bin in &b.survival_bins {
+                if bin.half_survival_range_m.is_none() {
+                    continue;
+                }
+                let truth = phys
+                    .band_half_survival_range_m(&reflectivities, bin.mor_m)
+                    .expect("the band has returns");
+                let law = bin.law_m.unwrap();
+                let err = law / truth - 1.0;
+                eprintln!(
+                    "seed {seed} band [{}, {:?}) MOR {:5.1} m ({} rec): truth {truth:6.2} law {law:6.2} ({:+.1} %)",
+                    b.reflectivity_min,
+                    b.reflectivity_max,
+                    bin.mor_m,
+                    bin.recordings,
+                    err * 100.0
+                );
+                bins += 1;
+                within += usize::from(err.abs() < 0.05);
+                worst = worst.max(err.abs());
+                if err.abs() >= 0.08 {
+                    failures.push(format!(
+                        "seed {seed} band {} MOR {:.1}: {:+.1} %",
+                        b.reflectivity_min,
+                        bin.mor_m,
+                        err * 100.0
+                    ));
+                }
+            }
+        }
+    }
+    eprintln!(
+        "narrow bands: {within} of {bins} covered bins within 5 % of their reflectivities' truth; worst {:.1} %",
+        worst * 100.0
+    );
+    assert!(bins >= 60, "only {bins} bins covered");
+    assert!(failures.is_empty(), "bins beyond 8 %: {failures:?}");
+    assert!(
+        within * 20 >= bins * 19,
+        "{within} of {bins} bins within 5 %"
     );
 }
 
