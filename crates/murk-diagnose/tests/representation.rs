@@ -7,7 +7,7 @@
 
 use murk_campaign::Campaign;
 use murk_diagnose::DiagnoseParams;
-use murk_diagnose::data::{ClearRec, Kept, KeptMemory, KeptView, load, load_with};
+use murk_diagnose::data::{ClearRec, Kept, KeptMemory, load, load_with};
 use murk_diagnose::evaluate::RecEval;
 use murk_fit::FitParams;
 use murk_fixtures::{Generator, GeneratorConfig, OutputOptions, PerClass, Preset};
@@ -40,20 +40,7 @@ fn a_recording_is_held_as_per_cell_summaries_and_a_clear_one_as_its_path() {
         .check()
         .unwrap();
     for (seed, recordings) in [(3u64, 16usize), (4, 24)] {
-        let dir = tempfile::tempdir().unwrap();
-        let mut c = GeneratorConfig::preset(Preset::Small);
-        c.campaign.recordings = recordings;
-        c.weather.mix = PerClass {
-            clear: 0.3,
-            fog: 0.7,
-            rain: 0.0,
-            snow: 0.0,
-        };
-        Generator::new(c)
-            .unwrap()
-            .write_campaign(seed, &OutputOptions::new(dir.path()))
-            .unwrap();
-        let campaign = Campaign::open(dir.path()).unwrap();
+        let (_dir, campaign) = campaign(seed, recordings);
         let loaded = load(&campaign, WeatherClass::Fog, &params).unwrap();
         let present = loaded.reference.present().len();
         assert!(loaded.recs.len() >= 4, "seed {seed}: {}", loaded.recs.len());
@@ -81,28 +68,6 @@ fn a_recording_is_held_as_per_cell_summaries_and_a_clear_one_as_its_path() {
             assert!(bytes <= 14 * present, "{}: {bytes} bytes", r.id);
         }
     }
-}
-
-/// Every value of a recording's kept returns as bits.
-type Bits = (Vec<(u32, u32, u32)>, Vec<(u32, u32, [u64; 4])>);
-
-fn bits(v: &KeptView<'_>) -> Bits {
-    (
-        v.singles
-            .iter()
-            .map(|k| (k.cell, k.range.to_bits(), k.reflectivity.to_bits()))
-            .collect(),
-        v.cells
-            .iter()
-            .map(|c| {
-                (
-                    c.cell,
-                    c.n,
-                    [c.range, c.range_sq, c.log_ratio, c.log_ratio_sq].map(f64::to_bits),
-                )
-            })
-            .collect(),
-    )
 }
 
 /// A generated fog campaign of `recordings` (30 % clear).
@@ -151,7 +116,7 @@ fn kept_returns_beyond_the_budget_spill_and_read_back_bit_for_bit() {
         assert_eq!(b.kept.is_spilled(), i >= 3, "{}", b.id);
         assert_eq!(b.kept.len(), a.kept.len());
         // The same returns, bit for bit, in the same order.
-        assert_eq!(bits(&a.kept.get()), bits(&b.kept.get()), "{}", b.id);
+        assert_eq!(a.kept.get(), b.kept.get(), "{}", b.id);
         if b.kept.is_spilled() {
             assert_eq!(b.kept.heap_bytes(), 0);
         } else {
@@ -164,26 +129,32 @@ fn kept_returns_beyond_the_budget_spill_and_read_back_bit_for_bit() {
     assert_eq!(std::fs::read_dir(spill_dir.path()).unwrap().count(), 0);
 }
 
+/// A quick fog diagnosis of `campaign` holding `kept_mb` of kept returns
+/// in memory: the report and the extended table as JSON.
+fn diagnose_json(campaign: &Campaign, kept_mb: f64) -> (String, Option<String>) {
+    let d = DiagnoseParams::new(WeatherClass::Fog)
+        .folds(2)
+        .permutations(99)
+        .sims(1)
+        .detectable(false)
+        .kept_memory_mb(kept_mb)
+        .check()
+        .unwrap()
+        .run(campaign)
+        .unwrap();
+    (
+        d.report.to_json(),
+        d.extended_table.map(|t| t.to_json().unwrap()),
+    )
+}
+
 #[test]
 fn a_diagnosis_is_the_same_bytes_with_its_kept_returns_spilled() {
     let (_dir, campaign) = campaign(6, 24);
-    let run = |mb: f64| {
-        let d = DiagnoseParams::new(WeatherClass::Fog)
-            .folds(2)
-            .permutations(99)
-            .sims(1)
-            .detectable(false)
-            .kept_memory_mb(mb)
-            .check()
-            .unwrap()
-            .run(&campaign)
-            .unwrap();
-        (
-            d.report.to_json(),
-            d.extended_table.map(|t| t.to_json().unwrap()),
-        )
-    };
-    let (held, spilled) = (run(256.0), run(0.0));
+    let (held, spilled) = (
+        diagnose_json(&campaign, 256.0),
+        diagnose_json(&campaign, 0.0),
+    );
     assert!(held.0.contains("\"findings\""));
     assert_eq!(held, spilled);
 }
@@ -287,18 +258,8 @@ fn pcap_recordings_are_held_as_cell_sums() {
             r.kept.len()
         );
     }
-    let run = |mb: f64| {
-        let d = DiagnoseParams::new(WeatherClass::Fog)
-            .folds(2)
-            .permutations(99)
-            .sims(1)
-            .detectable(false)
-            .kept_memory_mb(mb)
-            .check()
-            .unwrap()
-            .run(&campaign)
-            .unwrap();
-        d.report.to_json()
-    };
-    assert_eq!(run(256.0), run(0.0));
+    assert_eq!(
+        diagnose_json(&campaign, 256.0),
+        diagnose_json(&campaign, 0.0)
+    );
 }
