@@ -305,10 +305,23 @@ impl ClearPart {
         Ok(ClearPart { state })
     }
 
-    /// The parameters the part was mapped under (a fit with others cannot
-    /// use it).
+    /// The parameters the part was mapped under.
     pub fn params(&self) -> &FitValidParams {
         &self.state.body.params
+    }
+
+    /// Whether a fit under `params` can use the part: its parameters equal
+    /// the part's but for those only a fit's finish reads (`compare_laws`,
+    /// `apply_bend`: the law comparison and the bend, computed from the
+    /// degraded recordings' trials), so one part serves murk diagnose's
+    /// fold fits (no law comparison) and its fit on every recording.
+    pub fn serves(&self, params: &FitValidParams) -> bool {
+        clear_params_sha256(params) == clear_params_sha256(&self.state.body.params)
+    }
+
+    /// The clear reference the part built.
+    pub fn reference(&self) -> Result<Arc<ClearReference>, FitError> {
+        self.state.clear_reference()
     }
 
     /// The part re-keyed for `inputs` (the positions of its clear
@@ -326,7 +339,7 @@ impl ClearPart {
             reason,
         };
         let (header, mut body) = FitState::skeleton(inputs, params)?;
-        if header.params_sha256 != c.header.params_sha256 {
+        if !self.serves(params) {
             return Err(err("fitted with different parameters".into()));
         }
         let (mine, theirs) = (clear_recordings(inputs), clear_recordings(&c.body.inputs));
@@ -431,6 +444,16 @@ fn campaign_sha256(inputs: &FitInputs, metadata: &[(PathBuf, String)]) -> String
 
 fn params_sha256(params: &FitValidParams) -> String {
     sha256_hex(params.to_json().to_string().as_bytes())
+}
+
+/// The digest of the parameters a clear part depends on: all of them but
+/// `compare_laws` and `apply_bend`, which only the finish reads
+/// ([`ClearPart::serves`]).
+fn clear_params_sha256(params: &FitValidParams) -> String {
+    let mut p = params.clone();
+    p.compare_laws = true;
+    p.apply_bend = false;
+    params_sha256(&p)
 }
 
 /// The degraded recordings' MORs: the rain conversion from the metadata,

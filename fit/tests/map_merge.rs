@@ -348,7 +348,8 @@ fn degraded_states_of_another_reference_and_incomplete_merges_are_refused() {
 /// A clear part mapped once (`map_clear`, its images released) serves fits
 /// of the same clear recordings with any subset of the degraded ones: each
 /// table is byte for byte the one of mapping and merging that subset with
-/// its images kept; other clear recordings or parameters are refused.
+/// its images kept; other clear recordings or parameters are refused, but
+/// for the two only a fit's finish reads.
 #[test]
 fn a_clear_part_serves_fits_of_any_degraded_subset_byte_for_byte() {
     let tmp = tempfile::tempdir().unwrap();
@@ -393,5 +394,22 @@ fn a_clear_part_serves_fits_of_any_degraded_subset_byte_for_byte() {
             .unwrap_err()
             .to_string();
         assert!(e.contains("different parameters"), "{e}");
+        assert!(!clear.serves(&other));
+        // Parameters that only a fit's finish reads (the law comparison,
+        // the bend) may differ: the part serves them, byte for byte.
+        for q in [
+            FitParams::default()
+                .bootstrap_replicates(50)
+                .compare_laws(false),
+            FitParams::default()
+                .bootstrap_replicates(50)
+                .apply_bend(true),
+        ] {
+            let q = q.check().unwrap();
+            assert!(clear.serves(&q));
+            let with = q.fit_inputs_with(&inputs, &clear).unwrap();
+            let kept = FitState::map_all(&inputs, &q).unwrap().finish().unwrap();
+            assert_eq!(with.to_json().unwrap(), kept.to_json().unwrap());
+        }
     }
 }

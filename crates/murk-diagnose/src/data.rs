@@ -877,33 +877,62 @@ pub fn load_with(
         })?;
         Ok((points, frames))
     };
-    let read: Vec<Result<(CellImage, u32), DiagnoseError>> = clear_in
-        .par_iter()
-        .map(|r| {
-            let (points, frames) = clear_points(r)?;
-            Ok((
-                CellImage::from_frames(&points, frames, grid.cells()),
-                frames,
-            ))
-        })
-        .collect();
-    let mut images = Vec::with_capacity(read.len());
-    let mut clear_frames = Vec::with_capacity(read.len());
-    for r in read {
-        let (image, frames) = r?;
-        images.push(image);
-        clear_frames.push(frames);
-    }
-    let reference = ClearReference::build(grid.clone(), &images, params);
-    drop(images);
-    let mut clear_parts = Vec::with_capacity(fit_params.len());
+    // The baselines' clear parts: one per parameter set, except that sets
+    // differing only in what a fit's finish reads share one
+    // (`ClearPart::serves`: the folds' fits and the fit on every recording).
+    let mut clear_parts: Vec<std::sync::Arc<murk_fit::ClearPart>> =
+        Vec::with_capacity(fit_params.len());
     for p in fit_params {
+        if let Some(part) = clear_parts.iter().find(|c| c.serves(p)) {
+            clear_parts.push(std::sync::Arc::clone(part));
+            continue;
+        }
         let part = p.map_clear(&inputs).map_err(|e| DiagnoseError::Fit {
             what: "the clear recordings".into(),
             source: Box::new(e),
         })?;
         clear_parts.push(std::sync::Arc::new(part));
     }
+    // The reference: a clear part's where one serves these parameters on
+    // this grid (the same images and rule, so the same reference; reading
+    // every clear recording into images once more would only cost time
+    // and memory), else built here.
+    let from_part = match clear_parts.iter().find(|c| c.serves(params)) {
+        Some(part) => Some(part.reference().map_err(|e| DiagnoseError::Fit {
+            what: "the clear recordings".into(),
+            source: Box::new(e),
+        })?),
+        None => None,
+    };
+    let (reference, clear_frames) = match from_part.filter(|r| *r.grid() == grid) {
+        Some(r) => {
+            let frames: Vec<u32> = r.frames().iter().map(|&f| f as u32).collect();
+            ((*r).clone(), frames)
+        }
+        None => {
+            let read: Vec<Result<(CellImage, u32), DiagnoseError>> = clear_in
+                .par_iter()
+                .map(|r| {
+                    let (points, frames) = clear_points(r)?;
+                    Ok((
+                        CellImage::from_frames(&points, frames, grid.cells()),
+                        frames,
+                    ))
+                })
+                .collect();
+            let mut images = Vec::with_capacity(read.len());
+            let mut clear_frames = Vec::with_capacity(read.len());
+            for r in read {
+                let (image, frames) = r?;
+                images.push(image);
+                clear_frames.push(frames);
+            }
+            (
+                ClearReference::build(grid.clone(), &images, params),
+                clear_frames,
+            )
+        }
+    };
     // What pairing does to range and reflectivity in clear weather, per
     // cell, summed in recording order (a few recordings at a time).
     let mut off = vec![(0.0f64, 0.0f64, 0u32); grid.cells()];

@@ -263,3 +263,38 @@ fn pcap_recordings_are_held_as_cell_sums() {
         diagnose_json(&campaign, 0.0)
     );
 }
+
+/// The baselines' clear part serves the diagnosis's own reference and the
+/// folds' parameters (which differ from the full fit's only in the law
+/// comparison): loading with it gives the reference, clear recordings and
+/// recordings a load without it builds itself, and one part for both
+/// parameter sets.
+#[test]
+fn the_clear_part_gives_the_reference_a_load_builds_itself() {
+    let (_dir, campaign) = campaign(7, 16);
+    let full = FitParams::default().check().unwrap();
+    let folds = FitParams::default().compare_laws(false).check().unwrap();
+    let own = load(&campaign, WeatherClass::Fog, &full).unwrap();
+    let with = load_with(
+        &campaign,
+        WeatherClass::Fog,
+        &full,
+        &[folds, full.clone()],
+        &KeptMemory::default(),
+    )
+    .unwrap();
+    // Compared as text: cells outside the reference hold NaN, which `==`
+    // never equals.
+    assert_eq!(
+        format!("{:?}", with.reference),
+        format!("{:?}", own.reference)
+    );
+    assert_eq!(with.clear, own.clear);
+    assert_eq!(with.cells, own.cells);
+    assert_eq!(with.recs, own.recs);
+    assert_eq!(with.clear_parts.len(), 2);
+    assert!(std::sync::Arc::ptr_eq(
+        &with.clear_parts[0],
+        &with.clear_parts[1]
+    ));
+}
