@@ -4,7 +4,9 @@
 //! Pairing is murk-fit's own ([`murk_fit::observe`]), so the diagnosis sees
 //! exactly the classes the fit saw: per reference cell, how many of its
 //! expected returns were kept (*no change*); for each kept return, its
-//! measured range and reflectivity; per recording, the number of ghost and
+//! measured range and reflectivity, or for a cell that kept many (a
+//! `.pcap`'s revolutions) their sums ([`KeptReturns`], in memory up to a
+//! budget and beyond it in a temporary file); per recording, the number of ghost and
 //! ring returns, also per laser, azimuth sector and range bin
 //! ([`NearHistogram`]). Cells whose clear return is hidden behind a nearer weather
 //! return (their fate is unknown) are left out of the survival units, as the
@@ -396,12 +398,15 @@ impl KeptReturns {
             }
             sums.push(s);
         }
-        let singles: Vec<Kept> = kept
+        let mut singles: Vec<Kept> = kept
             .into_iter()
             .zip(several)
             .filter(|(_, s)| !s)
             .map(|(k, _)| k)
             .collect();
+        // The collect may reuse the whole list's allocation.
+        singles.shrink_to_fit();
+        sums.shrink_to_fit();
         KeptReturns {
             store: KeptStore::Memory(singles, sums),
             returns,

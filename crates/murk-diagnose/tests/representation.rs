@@ -246,6 +246,7 @@ fn pcap_recordings_are_held_as_cell_sums() {
             12 * r.kept.len()
         );
         assert_eq!(v.singles.len() + in_cells as usize, r.kept.len());
+        assert_eq!(r.kept.heap_bytes(), r.kept.bytes());
         // Several revolutions each: most returns share their cell, and what
         // the recording holds is bounded by the reference's cells (40 bytes
         // each at most: three listed returns take 36), not by its
