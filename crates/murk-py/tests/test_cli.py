@@ -118,7 +118,7 @@ def test_diagnose_equals_cli(tmp_path, cli):
 
 
 def test_diagnose_bad_spill_settings_raise_the_cli_message(tmp_path, cli):
-    for flag, kw in [(["--kept-memory-mb", "-1"], {"kept_memory_mb": -1.0}),
+    for flag, kw in [(["--kept-memory-mb=-1"], {"kept_memory_mb": -1.0}),
                      (["--spill-dir", str(tmp_path / "missing")], {"spill_dir": tmp_path / "missing"})]:
         p = subprocess.run([str(cli), "diagnose", str(CAMPAIGN), "--weather", "fog",
                             "--out", str(tmp_path / "r.json"), *flag], capture_output=True, text=True)
