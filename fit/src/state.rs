@@ -443,7 +443,9 @@ fn campaign_sha256(inputs: &FitInputs, metadata: &[(PathBuf, String)]) -> String
 }
 
 /// A writer that feeds a SHA-256 (so an encoding is hashed without being
-/// held).
+/// held). Written here because digest 0.11 no longer implements
+/// `std::io::Write` for its hashers (that moved to the `digest-io` crate):
+/// eight lines rather than a dependency for one call.
 struct HashWriter(Sha256);
 
 impl std::io::Write for HashWriter {

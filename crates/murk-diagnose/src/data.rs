@@ -325,16 +325,6 @@ pub struct KeptView<'a> {
     pub cells: std::borrow::Cow<'a, [KeptCell]>,
 }
 
-impl KeptView<'_> {
-    /// The view with its own copies.
-    pub fn into_owned(self) -> KeptView<'static> {
-        KeptView {
-            singles: std::borrow::Cow::Owned(self.singles.into_owned()),
-            cells: std::borrow::Cow::Owned(self.cells.into_owned()),
-        }
-    }
-}
-
 impl PartialEq for KeptReturns {
     fn eq(&self, other: &Self) -> bool {
         self.returns == other.returns
@@ -362,20 +352,22 @@ impl PartialEq for KeptReturns {
 impl KeptReturns {
     /// A recording's kept returns, in pairing order, held in memory: the
     /// returns of a cell that kept fewer than [`SUM_FROM`] as they are,
-    /// those of a cell that kept more as the cell's sums, centred on `cells`' reference
-    /// range and reflectivity (every pair is with a reference cell).
-    pub fn new(kept: Vec<Kept>, cells: &[Option<CellInfo>]) -> KeptReturns {
+    /// those of a cell that kept more as the cell's sums, centred on
+    /// `cells`' reference range and reflectivity (every pair is with a
+    /// reference cell). `kept_per_cell[c]` is how many of them cell `c` kept
+    /// (the pairing tally's count), so only the summed cells' returns are
+    /// gathered.
+    pub fn new(kept: Vec<Kept>, cells: &[Option<CellInfo>], kept_per_cell: &[u32]) -> KeptReturns {
         let returns = kept.len();
-        let mut order: Vec<usize> = (0..kept.len()).collect();
-        // Stable: within a cell, pairing order.
+        let summed = |c: u32| kept_per_cell[c as usize] as usize >= SUM_FROM;
+        // The summed cells' returns by cell; stable, so in pairing order
+        // within a cell.
+        let mut order: Vec<usize> = (0..kept.len()).filter(|&i| summed(kept[i].cell)).collect();
         order.sort_by_key(|&i| kept[i].cell);
-        let mut several = vec![false; kept.len()];
         let mut sums = Vec::new();
         for group in order.chunk_by(|&a, &b| kept[a].cell == kept[b].cell) {
-            if group.len() < SUM_FROM {
-                continue;
-            }
             let cell = kept[group[0]].cell;
+            debug_assert_eq!(group.len(), kept_per_cell[cell as usize] as usize);
             let info = cells[cell as usize]
                 .as_ref()
                 .expect("pairs are reference cells");
@@ -388,7 +380,6 @@ impl KeptReturns {
                 log_ratio_sq: 0.0,
             };
             for &i in group {
-                several[i] = true;
                 let d = kept[i].range as f64 - info.cov.range;
                 let l = log_ratio(kept[i].reflectivity as f64, info.cov.reflectivity);
                 s.range += d;
@@ -398,12 +389,7 @@ impl KeptReturns {
             }
             sums.push(s);
         }
-        let mut singles: Vec<Kept> = kept
-            .into_iter()
-            .zip(several)
-            .filter(|(_, s)| !s)
-            .map(|(k, _)| k)
-            .collect();
+        let mut singles: Vec<Kept> = kept.into_iter().filter(|k| !summed(k.cell)).collect();
         // The collect may reuse the whole list's allocation.
         singles.shrink_to_fit();
         sums.shrink_to_fit();
@@ -1054,7 +1040,7 @@ pub fn load_with(
                 }
             })
             .collect();
-        let kept = KeptReturns::new(kept, &cells);
+        let kept = KeptReturns::new(kept, &cells, &tally.matched);
         let rec = campaign
             .recording(&r.id)
             .ok_or_else(|| DiagnoseError::Campaign {
@@ -1173,6 +1159,15 @@ mod tests {
         }
     }
 
+    /// Kept returns per cell of [`cells`], as the pairing tally counts them.
+    fn counts(v: &[Kept]) -> Vec<u32> {
+        let mut n = vec![0; 8];
+        for k in v {
+            n[k.cell as usize] += 1;
+        }
+        n
+    }
+
     #[test]
     fn a_cell_of_four_returns_or_more_is_summed_and_the_rest_listed_in_order() {
         let cells = cells();
@@ -1188,7 +1183,7 @@ mod tests {
             kept(3, 13.0, 23.0),
             kept(3, 13.1, 0.2),
         ];
-        let k = KeptReturns::new(v, &cells);
+        let k = KeptReturns::new(v.clone(), &cells, &counts(&v));
         assert_eq!(k.len(), 8);
         assert_eq!(k.bytes(), 4 * 12 + 40);
         let g = k.get();
@@ -1232,17 +1227,10 @@ mod tests {
         let b = vec![kept(2, f32::MIN_POSITIVE, -0.0)];
         let mut end = 0;
         let (mut ka, mut kb) = (
-            KeptReturns::new(a.clone(), &cells),
-            KeptReturns::new(b.clone(), &cells),
+            KeptReturns::new(a.clone(), &cells, &counts(&a)),
+            KeptReturns::new(b.clone(), &cells, &counts(&b)),
         );
-        let (ga, gb) = (ka.get().into_owned(), kb.get().into_owned());
-        assert_eq!((ga.singles.len(), ga.cells.len()), (5, 1));
-        ka.spill(&file, &mut end).unwrap();
-        kb.spill(&file, &mut end).unwrap();
-        assert_eq!(end, (5 * 12 + 40 + 12) as u64);
-        assert!(ka.is_spilled() && kb.is_spilled());
-        assert_eq!((ka.len(), kb.len(), ka.heap_bytes()), (9, 1, 0));
-        assert_eq!(ka.bytes(), 5 * 12 + 40);
+        assert_eq!((ka.get().singles.len(), ka.get().cells.len()), (5, 1));
         type Bits = (Vec<(u32, u32, u32)>, Vec<(u32, u32, [u64; 4])>);
         let bits = |v: &KeptView<'_>| -> Bits {
             (
@@ -1262,8 +1250,15 @@ mod tests {
                     .collect(),
             )
         };
-        assert_eq!(bits(&ka.get()), bits(&ga));
-        assert_eq!(bits(&kb.get()), bits(&gb));
+        let (ga, gb) = (bits(&ka.get()), bits(&kb.get()));
+        ka.spill(&file, &mut end).unwrap();
+        kb.spill(&file, &mut end).unwrap();
+        assert_eq!(end, (5 * 12 + 40 + 12) as u64);
+        assert!(ka.is_spilled() && kb.is_spilled());
+        assert_eq!((ka.len(), kb.len(), ka.heap_bytes()), (9, 1, 0));
+        assert_eq!(ka.bytes(), 5 * 12 + 40);
+        assert_eq!(bits(&ka.get()), ga);
+        assert_eq!(bits(&kb.get()), gb);
         // Spilling again leaves them where they are.
         ka.spill(&file, &mut end).unwrap();
         assert_eq!(end, (5 * 12 + 40 + 12) as u64);
@@ -1285,7 +1280,7 @@ mod tests {
             "{msg}"
         );
         // Later reads still work; the first error stays.
-        assert_eq!(bits(&kb.get()), bits(&gb));
+        assert_eq!(bits(&kb.get()), gb);
         assert_eq!(file.error().unwrap(), msg);
     }
 

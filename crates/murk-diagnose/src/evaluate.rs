@@ -35,7 +35,9 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::DiagnoseError;
-use crate::data::{CellInfo, Kept, Loaded, NearHistogram, Rec, log_ratio, read_calibrated};
+use crate::data::{
+    CellInfo, Kept, KeptView, Loaded, NearHistogram, Rec, log_ratio, read_calibrated,
+};
 use crate::scene::{SceneMetrics, VoxelBox};
 
 /// Keep probabilities are clipped into `[P_FLOOR, 1 − P_FLOOR]` for the log
@@ -86,8 +88,8 @@ pub struct RecEval {
 }
 
 /// The residuals of the kept returns of one reference cell of a recording
-/// ([`RecEval::kept_residuals`]): `n` returns (1 for a return alone in its
-/// cell), the sum of their residuals and of their squares. Everything
+/// ([`RecEval::kept_residuals`]): `n` returns (1 for a listed return), the
+/// sum of their residuals and of their squares. Everything
 /// computed from kept returns is a sum of these.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct KeptUnit {
@@ -163,16 +165,26 @@ impl RecEval {
     }
 
     /// The range (`Range`) or intensity (`Intensity`) residuals of the
-    /// recording's kept returns, as [`KeptUnit`]s: one per return alone in
-    /// its reference cell (in pairing order), then one per cell that kept
-    /// several (their sums). A range residual is the measured range less
+    /// recording's kept returns, as [`KeptUnit`]s: one per listed return
+    /// (in pairing order), then one per cell whose returns are summed
+    /// ([`crate::data::KeptReturns`]). A range residual is the measured range less
     /// the reference cell's, less what pairing gives the cell in clear
     /// weather, less the table's range extension; an intensity residual the
     /// log ratio of measured to reference reflectivity, less the
     /// clear-weather offset, less the log of the table's intensity factor.
     pub fn kept_residuals(&self, loaded: &Loaded, obs: ExtensionObservable) -> Vec<KeptUnit> {
+        self.kept_residuals_of(loaded, &loaded.recs[self.rec].kept.get(), obs)
+    }
+
+    /// [`Self::kept_residuals`] of kept returns already read (a caller that
+    /// needs both observables reads a spilled recording once).
+    fn kept_residuals_of(
+        &self,
+        loaded: &Loaded,
+        kept: &KeptView<'_>,
+        obs: ExtensionObservable,
+    ) -> Vec<KeptUnit> {
         let rec = &loaded.recs[self.rec];
-        let kept = rec.kept.get();
         let info = |c: u32| {
             loaded.cells[c as usize]
                 .as_ref()
@@ -580,9 +592,10 @@ impl Metrics {
                     tr += n;
                 }
                 let mut kept = [0.0f64; 5];
+                let read = rec.kept.get();
                 let (range, intensity) = (
-                    e.kept_residuals(loaded, ExtensionObservable::Range),
-                    e.kept_residuals(loaded, ExtensionObservable::Intensity),
+                    e.kept_residuals_of(loaded, &read, ExtensionObservable::Range),
+                    e.kept_residuals_of(loaded, &read, ExtensionObservable::Intensity),
                 );
                 for (r, i) in range.iter().zip(&intensity) {
                     kept[0] += r.sum;
