@@ -68,6 +68,7 @@ fn yes() -> bool {
 /// | `declared_geometry` | false | pair on campaign.toml's azimuth grid instead of the firing grid measured from the clear recordings (see [`observe`](crate::observe)); disagreements are warned either way | |
 /// | `azimuth_neighbours` | 1 | azimuth bins either side searched when the own cell does not pair | 0–4 |
 /// | `reference_min_presence` | 0.5 | share of clear recordings a cell must return in to enter the reference | (0, 1] |
+/// | `reference_min_agreement` | 0.8 | share of a cell's clear recordings whose range must lie within the pairing tolerance of the cell's median for the cell to be stable (a direction that sees one surface in some revolutions and another in others — a depth edge inside the cell, which a free-running unit samples at a new azimuth every revolution — is not a trial: its losses would read as dropout) | [0.5, 1] |
 /// | `min_points_per_bin` | 50 | *no change* returns a MOR bin needs for its quantile | ≥ 1 |
 /// | `censor_fraction` | 0.02 | a MOR bin is censored when fewer than this share of the band's clear returns lie beyond its quantile (or beyond slope × MOR) | [0, 1) |
 /// | `censor_min_points` | 10 | … or fewer than this many | ≥ 0 |
@@ -103,6 +104,7 @@ pub struct FitValidParams {
     pub(crate) declared_geometry: bool,
     pub(crate) azimuth_neighbours: u32,
     pub(crate) reference_min_presence: f64,
+    pub(crate) reference_min_agreement: f64,
     pub(crate) min_points_per_bin: u64,
     pub(crate) censor_fraction: f64,
     pub(crate) censor_min_points: u64,
@@ -143,6 +145,7 @@ impl Default for FitParams {
             declared_geometry: false,
             azimuth_neighbours: 1,
             reference_min_presence: 0.5,
+            reference_min_agreement: 0.8,
             min_points_per_bin: 50,
             censor_fraction: 0.02,
             censor_min_points: 10,
@@ -203,6 +206,8 @@ impl FitParams {
         azimuth_neighbours: u32);
     setter!(/// Sets `reference_min_presence`.
         reference_min_presence: f64);
+    setter!(/// Sets `reference_min_agreement`.
+        reference_min_agreement: f64);
     setter!(/// Sets `min_points_per_bin`.
         min_points_per_bin: u64);
     setter!(/// Sets `censor_fraction`.
@@ -327,6 +332,13 @@ impl FitParams {
                 return bad(name, v.to_string(), "must lie in (0, 1]");
             }
         }
+        if !(0.5..=1.0).contains(&p.reference_min_agreement) {
+            return bad(
+                "reference_min_agreement",
+                p.reference_min_agreement.to_string(),
+                "must lie in [0.5, 1] (below a half the median is not the cell's range)",
+            );
+        }
         if p.min_points_per_bin == 0 {
             return bad("min_points_per_bin", "0".into(), "must be ≥ 1");
         }
@@ -438,6 +450,11 @@ impl FitValidParams {
     /// Presence share for a reference cell.
     pub fn reference_min_presence(&self) -> f64 {
         self.reference_min_presence
+    }
+    /// Share of a cell's clear recordings that must agree with its median
+    /// range for the cell to be stable.
+    pub fn reference_min_agreement(&self) -> f64 {
+        self.reference_min_agreement
     }
     /// Minimum *no change* returns per MOR bin.
     pub fn min_points_per_bin(&self) -> u64 {
@@ -588,6 +605,22 @@ mod tests {
         rejected(
             FitParams::new().reference_min_presence(0.0),
             "reference_min_presence",
+        );
+    }
+
+    #[test]
+    fn agreement_below_a_half_or_above_one_is_rejected() {
+        for v in [0.49, 1.01, f64::NAN] {
+            rejected(
+                FitParams::new().reference_min_agreement(v),
+                "reference_min_agreement",
+            );
+        }
+        assert!(
+            FitParams::new()
+                .reference_min_agreement(0.5)
+                .check()
+                .is_ok()
         );
     }
 

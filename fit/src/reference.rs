@@ -9,9 +9,13 @@
 //! - **present**: returned in at least `reference_min_presence` of the clear
 //!   recordings (robust to clear-weather dropouts and to directions that see
 //!   the sky), and
-//! - **stable**: the median absolute deviation of their per-recording ranges
-//!   is within the pairing tolerance (robust to vegetation, moving objects,
-//!   cells straddling an edge).
+//! - **stable**: at least `reference_min_agreement` (0.8) of their
+//!   per-recording ranges lie within the pairing tolerance of the median
+//!   (robust to vegetation, moving objects, cells straddling a depth edge:
+//!   a free-running unit fires at a new azimuth every revolution, so such a
+//!   cell sees the near surface in some recordings and the far one in
+//!   others, and the recordings on the minority surface would otherwise
+//!   read as dropouts).
 //!
 //! Cells that returned in some clear recording but fail either test keep a
 //! range *envelope* `[min, max]`, so that a degraded return inside it is
@@ -351,6 +355,7 @@ impl ClearReference {
             frames: frames.clone(),
         };
         let min_presence = params.reference_min_presence();
+        let min_agreement = params.reference_min_agreement();
         // What the leave-one-out pass needs per cell: stable, its median and
         // expected hits per scan, its hit sum; per entry, the cell's median
         // without that entry's recording (NaN when no other recording hit
@@ -435,11 +440,17 @@ impl ClearReference {
                 reference.env_lo[c] = rs[0];
                 reference.env_hi[c] = rs[m - 1];
                 let med = median_f32(&mut rs.clone());
-                dev.clear();
-                dev.extend(rs.iter().map(|r| (r - med).abs()));
-                let mad = median_f32(&mut dev);
                 let tol = params.pairing_tolerance(med as f64) as f32;
-                let stable = mad <= tol;
+                // `rs` is sorted: the ranges within the tolerance of the
+                // median are one run of it. The median absolute deviation
+                // is only needed when enough of them agree.
+                let agree =
+                    rs.partition_point(|r| r - med <= tol) - rs.partition_point(|r| r - med < -tol);
+                let stable = agree as f64 >= min_agreement * m as f64 && {
+                    dev.clear();
+                    dev.extend(rs.iter().map(|r| (r - med).abs()));
+                    median_f32(&mut dev) <= tol
+                };
                 hs.clear();
                 hs.extend((0..m).map(|k| {
                     let f = frames[e_rec[k] as usize];
@@ -571,7 +582,8 @@ impl ClearReference {
 
 /// What the leave-one-out pass reads per cell (and per entry).
 struct LooCells {
-    /// The cell's clear ranges agree (MAD within the pairing tolerance).
+    /// The cell's clear ranges agree (`reference_min_agreement` of them
+    /// within the pairing tolerance of their median).
     stable: Vec<bool>,
     /// Median range over every clear recording that hit the cell.
     median: Vec<f32>,
@@ -965,6 +977,36 @@ mod tests {
         // The unstable cell keeps its envelope: 4.5–40.5 m with 0.5 m tolerance.
         assert!(r.in_envelope(2, 30.0, 0.5) && !r.in_envelope(2, 41.0, 0.5));
         assert!(r.in_envelope(1, 7.2, 0.5));
+    }
+
+    #[test]
+    fn a_cell_on_a_depth_edge_is_stable_only_if_enough_recordings_agree() {
+        // Cell 0 sees the near wall (10 m) in 7 of 10 clear recordings and
+        // the far one (30 m) in 3: its median absolute deviation is within
+        // the tolerance, but 30 % of its recordings would read as dropouts.
+        // Cell 1 sees the wall in 9 of 10.
+        let imgs: Vec<CellImage> = (0..10)
+            .map(|i| {
+                img(&[
+                    (0, if i < 7 { 10.0 } else { 30.0 }, 5.0),
+                    (1, if i < 9 { 12.0 } else { 40.0 }, 5.0),
+                ])
+            })
+            .collect();
+        let strict = FitParams::default().check().unwrap();
+        let r = ClearReference::build(grid(), &imgs, &strict);
+        assert_eq!(r.present(), &[1], "default agreement 0.8");
+        assert!(
+            r.in_envelope(0, 20.0, 0.5),
+            "the edge cell keeps its envelope"
+        );
+        let lax = FitParams::default()
+            .reference_min_agreement(0.7)
+            .check()
+            .unwrap();
+        let r = ClearReference::build(grid(), &imgs, &lax);
+        assert_eq!(r.present(), &[0, 1], "agreement 0.7");
+        assert_eq!(r.range(0), 10.0);
     }
 
     #[test]
