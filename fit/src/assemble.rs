@@ -742,7 +742,7 @@ pub fn weather(
         low,
         high,
         level: 0.95,
-        method: "cluster-robust over recordings".into(),
+        method: "cluster-robust over recordings (leave-one-recording-out, CR3)".into(),
     };
     let alpha = p.edge_test_alpha();
     let edge_record = |e: &EdgeEvidence| EdgeTest {

@@ -566,14 +566,37 @@ impl SurvivalResult {
     }
 }
 
-/// The cluster-robust ("sandwich") covariance of the fit's free internal
-/// parameters over recordings: `A·B·A · G/(G−1)` with `A` the inverse
-/// observed information and `B = Σ_g s_g s_gᵀ` the outer products of the
-/// score of each recording `g` at the optimum (`clusters[g][band]` are its
-/// observations). Returns of one recording share its MOR reading and
-/// sensor state, so they are not independent trials: this covariance is as
-/// large as the spread between recordings makes it, however many returns
-/// each has. `None` with fewer than two recordings or a singular
+/// The cluster-robust covariance of the fit's free internal parameters over
+/// recordings, in its leave-one-recording-out (jackknife, "CR3") form:
+///
+/// ```text
+/// V = (G−1)/G · Σ_g Δ_g Δ_gᵀ,   Δ_g = (H − H_g)⁻¹ s_g
+/// ```
+///
+/// with `H` the observed information of the whole fit, `s_g` and `H_g` the
+/// score and information of recording `g` alone at the optimum
+/// (`clusters[g][band]` are its observations): `Δ_g` is one Newton step of
+/// the fit without recording `g`, so `V` is the spread of the estimates
+/// with one recording left out. Returns of one recording share its MOR
+/// reading and sensor state, so they are not independent trials: this
+/// covariance is as large as the spread between recordings makes it,
+/// however many returns each has.
+///
+/// Why not the plain sandwich `A·B·A · G/(G−1)` (`A = H⁻¹`, `B = Σ s_g
+/// s_gᵀ`): with the 10–30 recordings of a weather that campaigns have, it
+/// runs narrow, because each recording pulls the optimum towards itself
+/// and so looks closer to it than a new recording would be (the same
+/// leverage that makes OLS residuals small). Removing the recording's own
+/// information (`H − H_g`) undoes that pull; for a linear model this is
+/// exactly the CR3 estimator of Bell & McCaffrey (2002) and MacKinnon,
+/// Nielsen & Webb (2023). Measured on 40 seeds of a generated fog campaign
+/// of ~28 fog recordings with 7.5 % MOR noise (`fit/tests/intervals.rs`):
+/// the spread of the slope over seeds was 1.09–1.12 times the sandwich's
+/// standard error and is 0.98–1.01 times this one's; its intervals cover
+/// the seeds' mean estimate 73 times in 80 (the sandwich's 71). A
+/// recording whose removal leaves `H − H_g`
+/// singular (it alone pins a parameter) contributes its sandwich term
+/// `A·s_g`. `None` with fewer than two recordings or a singular
 /// information.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RobustCovariance {
@@ -607,41 +630,29 @@ pub fn robust_covariance(
     if g_n < 2 {
         return None;
     }
+    let info = invert(a)?;
     let layout = result.layout(opts);
     let n_free = a.len();
     let theta = &result.theta;
+    let rho = theta[n_free..].to_vec();
     let h = 1e-5;
-    let mut meat = vec![vec![0.0; n_free]; n_free];
-    for c in clusters {
+    let units = clusters.iter().map(|c| {
+        let nll = |t: &[f64]| {
+            let mut full = t.to_vec();
+            full.extend_from_slice(&rho);
+            joint_nll(c, &layout, opts, None, &full)
+        };
         let mut g = vec![0.0; n_free];
         for (k, gk) in g.iter_mut().enumerate() {
-            let mut tp = theta.clone();
-            let mut tm = theta.clone();
+            let mut tp = theta[..n_free].to_vec();
+            let mut tm = tp.clone();
             tp[k] += h;
             tm[k] -= h;
-            let fp = joint_nll(c, &layout, opts, None, &tp);
-            let fm = joint_nll(c, &layout, opts, None, &tm);
-            *gk = (fp - fm) / (2.0 * h);
+            *gk = (nll(&tp) - nll(&tm)) / (2.0 * h);
         }
-        for i in 0..n_free {
-            for j in 0..n_free {
-                meat[i][j] += g[i] * g[j];
-            }
-        }
-    }
-    let corr = g_n as f64 / (g_n as f64 - 1.0);
-    let mut v = vec![vec![0.0; n_free]; n_free];
-    for (i, vi) in v.iter_mut().enumerate() {
-        for (j, vij) in vi.iter_mut().enumerate() {
-            let mut x = 0.0;
-            for p in 0..n_free {
-                for q in 0..n_free {
-                    x += a[i][p] * meat[p][q] * a[q][j];
-                }
-            }
-            *vij = x * corr;
-        }
-    }
+        (g, hessian(&nll, &theta[..n_free], &vec![1e-4; n_free]))
+    });
+    let v = crate::stats::leave_one_out_covariance(&info, a, units);
     Some(RobustCovariance { v, clusters: g_n })
 }
 

@@ -381,10 +381,14 @@ pub struct Interval {
     pub high: f64,
     /// Nominal coverage (0.95).
     pub level: f64,
-    /// How: `cluster-robust over recordings` (sandwich covariance with one
-    /// cluster per recording, in the fit's internal parameters — log slope,
+    /// How: `cluster-robust over recordings (leave-one-recording-out, CR3)`
+    /// (the survival fit: the spread of one-step estimates with one
+    /// recording left out, in the fit's internal parameters — log slope,
     /// log width, logit dropout — with Student's t on recordings − 1 degrees
-    /// of freedom) or `bootstrap over recordings`.
+    /// of freedom; the count laws' intervals say the same, with t on
+    /// recordings − parameters), `cluster-robust over recordings` (tables
+    /// written before the leave-one-out form) or `bootstrap over
+    /// recordings`.
     pub method: String,
 }
 

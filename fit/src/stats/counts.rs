@@ -23,11 +23,16 @@
 //! sensor state, so they are overdispersed against Poisson, and a gain must
 //! hold across recordings, not only in the Poisson sum.
 //!
-//! **Intervals** are cluster-robust over recordings: a sandwich covariance
-//! `B⁻¹ M B⁻¹ · n/(n − p)` with `B` the Fisher information and `M` the sum
-//! of the recordings' outer score products (one cluster per recording), and
+//! **Intervals** are cluster-robust over recordings, in the
+//! leave-one-recording-out ("CR3") form: `(n−1)/n · Σ_g Δ_g Δ_gᵀ` with
+//! `Δ_g = (B − B_g)⁻¹ s_g`, `B` the Fisher information, `B_g` and `s_g` one
+//! recording's information and score (one cluster per recording), and
 //! Student's t on `n − p` degrees of freedom. They do not assume the counts
-//! are Poisson; only the mean law is assumed.
+//! are Poisson; only the mean law is assumed. Over 60 simulated campaigns
+//! (`intervals_over_recordings_cover_the_truth` below) the 95 % intervals
+//! cover the truth for `n_ref` 100 %, the exponent 91.7 % and the onset MOR
+//! 93.3 % of the time (the plain sandwich `B⁻¹MB⁻¹·n/(n−p)` it replaced:
+//! 100 %, 90.0 %, 91.7 %).
 //!
 //! **Identifiability.** A law whose exponent's robust standard error exceeds
 //! [`MAX_EXPONENT_STD_ERROR`] (a narrow MOR range, few counts) or whose
@@ -384,37 +389,38 @@ fn fit_family(f: Family, obs: &[Obs], mor_ref: f64) -> Option<CountFit> {
     }
     let th = best.x;
     let p = f.parameters();
-    // Bread (Fisher information) and meat (outer products of the
-    // recordings' scores).
+    // Fisher information, and each recording's score and information.
     let mut b = vec![vec![0.0; p]; p];
-    let mut m = vec![vec![0.0; p]; p];
+    let mut own: Vec<(Vec<f64>, f64, f64)> = Vec::with_capacity(obs.len());
     for o in obs {
         let lam = (o.off + eta(f, &th, lm, o.l)).exp();
         let g = grad(f, &th, lm, o.l);
-        let r = o.c - lam;
         for i in 0..p {
             for j in 0..p {
                 b[i][j] += lam * g[i] * g[j];
-                m[i][j] += r * r * g[i] * g[j];
             }
         }
+        own.push((g, lam, o.c - lam));
     }
     let (cov, method) = match invert(&b) {
         Some(bi) if n >= p + 2 => {
-            let scale = n as f64 / (n - p) as f64;
-            let mut v = vec![vec![0.0; p]; p];
-            for i in 0..p {
-                for j in 0..p {
-                    let mut s = 0.0;
-                    for k in 0..p {
-                        for l in 0..p {
-                            s += bi[i][k] * m[k][l] * bi[l][j];
-                        }
-                    }
-                    v[i][j] = s * scale;
-                }
-            }
-            (Some(v), "cluster-robust over recordings")
+            // Leave one recording out ("CR3", as the survival fit's
+            // intervals): each recording's step is its score through the
+            // information without it, `(B − B_g)⁻¹ s_g`, so a recording
+            // that pulls the law towards itself does not look close to it.
+            let units = own.iter().map(|(g, lam, r)| {
+                let score: Vec<f64> = g.iter().map(|gi| r * gi).collect();
+                let info: Vec<Vec<f64>> = g
+                    .iter()
+                    .map(|gi| g.iter().map(|gj| lam * gi * gj).collect())
+                    .collect();
+                (score, info)
+            });
+            let v = crate::stats::leave_one_out_covariance(&b, &bi, units);
+            (
+                Some(v),
+                "cluster-robust over recordings (leave-one-recording-out, CR3)",
+            )
         }
         Some(bi) => (
             Some(bi),
@@ -606,7 +612,10 @@ mod tests {
         let f = power(&data).unwrap();
         assert!((f.n_ref() / 30.0 - 1.0).abs() < 0.05, "{f:?}");
         assert!((f.exponent() - 1.5).abs() < 0.08, "{f:?}");
-        assert_eq!(f.method, "cluster-robust over recordings");
+        assert_eq!(
+            f.method,
+            "cluster-robust over recordings (leave-one-recording-out, CR3)"
+        );
     }
 
     #[test]
