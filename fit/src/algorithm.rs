@@ -128,6 +128,14 @@ pub(crate) fn assemble_table(parts: Parts<'_>) -> Result<FittedTable, FitError> 
             rain: (class == WeatherClass::Rain)
                 .then(|| conversion.clone())
                 .flatten(),
+            mor_reading_variance: crate::assemble::mor_reading_variance(
+                &inputs
+                    .recordings
+                    .iter()
+                    .filter(|r| r.class == class)
+                    .map(|r| r.mor_readings.clone())
+                    .collect::<Vec<_>>(),
+            ),
         };
         let (c, d) = weather(acc, &cx);
         weathers.insert(class, c);

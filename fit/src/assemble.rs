@@ -50,6 +50,111 @@ pub struct RainSample {
     pub mor: f64,
 }
 
+/// Variance of a recording's MOR reading error in `ln MOR`, averaged over
+/// the recordings of a weather, from the visibility sensors' disagreement,
+/// with its standard error.
+///
+/// `readings` holds each recording's visibility readings (metres; its MOR
+/// is their mean). The per-sensor variance `σ²` of `ln` reading is pooled
+/// over the recordings read by two or more sensors (`(k − 1)` degrees of
+/// freedom each); a recording's MOR, the mean of `k` readings, carries
+/// `σ²/k`; the mean of that over the recordings is the estimate. Its
+/// standard error is the jackknife's over recordings (no assumption on the
+/// noise's distribution). What the sensors share — a common calibration
+/// error, or a MOR along the beam other than at the sensors — does not
+/// show in their disagreement and is not in this. Errors say why nothing
+/// can be estimated.
+pub fn mor_reading_variance(readings: &[Vec<f64>]) -> Result<ReadingVariance, String> {
+    if readings.is_empty() {
+        return Err("no recording".into());
+    }
+    if readings.iter().any(Vec::is_empty) {
+        return Err(
+            "some recordings have no visibility reading (their MOR comes from the rain conversion)"
+                .into(),
+        );
+    }
+    if readings
+        .iter()
+        .flatten()
+        .any(|&m| !(m.is_finite() && m > 0.0))
+    {
+        return Err("a visibility reading is not positive".into());
+    }
+    // Per recording: sum of squares of ln readings about their mean, the
+    // degrees of freedom, 1/k.
+    let parts: Vec<(f64, usize, f64)> = readings
+        .iter()
+        .map(|r| {
+            let k = r.len() as f64;
+            let mu = r.iter().map(|m| m.ln()).sum::<f64>() / k;
+            let ss = r.iter().map(|m| (m.ln() - mu).powi(2)).sum::<f64>();
+            (ss, r.len() - 1, 1.0 / k)
+        })
+        .collect();
+    let (ss, dof, inv_k) = parts
+        .iter()
+        .fold((0.0, 0usize, 0.0), |a, p| (a.0 + p.0, a.1 + p.1, a.2 + p.2));
+    if dof == 0 {
+        return Err(
+            "every recording is read by one visibility sensor: the reading noise cannot be estimated"
+                .into(),
+        );
+    }
+    let n = parts.len() as f64;
+    let estimate = |ss: f64, dof: usize, inv_k: f64, n: f64| ss / dof as f64 * inv_k / n;
+    let variance = estimate(ss, dof, inv_k, n);
+    // Delete-one jackknife over recordings (a left-out recording that held
+    // the only degrees of freedom leaves nothing: no error then).
+    let loo: Vec<f64> = parts
+        .iter()
+        .filter(|p| dof > p.1)
+        .map(|p| estimate(ss - p.0, dof - p.1, inv_k - p.2, n - 1.0))
+        .collect();
+    let std_error = (loo.len() >= 2 && loo.len() == parts.len()).then(|| {
+        let m = loo.iter().sum::<f64>() / n;
+        ((n - 1.0) / n * loo.iter().map(|v| (v - m).powi(2)).sum::<f64>()).sqrt()
+    });
+    Ok(ReadingVariance {
+        variance,
+        std_error: std_error.unwrap_or(f64::INFINITY),
+    })
+}
+
+/// [`mor_reading_variance`]'s answer.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ReadingVariance {
+    /// Mean variance of a recording's MOR reading error in `ln MOR`.
+    pub variance: f64,
+    /// Its standard error over recordings (infinite when one recording
+    /// holds every degree of freedom).
+    pub std_error: f64,
+}
+
+/// The relative edge width with a MOR reading variance `v` (in `ln MOR`)
+/// taken out: `√(max(w² − v, 0))`.
+///
+/// The survival fit sees returns at `r / MOR'` with `MOR' = MOR·e^e`,
+/// `e ~ N(0, v)` per recording, so a probit edge of width `w` at the true
+/// MOR shows as one of width `√(w² + v)` (to first order in `e`; for the
+/// logistic edge, whose convolution with a normal is close to but not
+/// exactly logistic, approximately).
+pub fn deconvolve_width(w: f64, v: f64) -> f64 {
+    (w * w - v).max(0.0).sqrt()
+}
+
+/// The interval of the corrected width: the fitted width's interval
+/// `[lo, hi]` about `w`, and `t` standard errors of the reading variance,
+/// combined in quadrature in `w²` (where the correction is a subtraction),
+/// then deconvolved.
+pub fn deconvolve_interval(w: f64, [lo, hi]: [f64; 2], v: ReadingVariance, t: f64) -> [f64; 2] {
+    let dv = t * v.std_error;
+    let c = w * w - v.variance;
+    let down = c - ((w * w - lo * lo).powi(2) + dv * dv).sqrt();
+    let up = c + ((hi * hi - w * w).powi(2) + dv * dv).sqrt();
+    [down.max(0.0).sqrt(), up.max(0.0).sqrt()]
+}
+
 /// Reliabilities below this are not corrected: the gauges disagree so much
 /// that the corrected slope would be noise (the OLS line is kept and the
 /// reliability reported).
@@ -471,6 +576,9 @@ pub struct WeatherContext<'a> {
     pub dropout_clear: Option<f64>,
     /// The rain conversion (rain only).
     pub rain: Option<Result<RainConversion, String>>,
+    /// Variance of the recordings' MOR reading error in `ln MOR`
+    /// ([`mor_reading_variance`]), or why it is unknown.
+    pub mor_reading_variance: Result<ReadingVariance, String>,
 }
 
 fn band_obs(acc: &WeatherAcc, partition: &Partition, band: &Band) -> Vec<crate::survival::Obs> {
@@ -744,6 +852,8 @@ pub fn weather(
         level: 0.95,
         method: "cluster-robust over recordings (leave-one-recording-out, CR3)".into(),
     };
+    let reading_var = cx.mor_reading_variance.as_ref().ok().copied();
+    let t_recordings = crate::survival::student_t_975((acc.rows.len() as f64 - 1.0).max(1.0));
     let alpha = p.edge_test_alpha();
     let edge_record = |e: &EdgeEvidence| EdgeTest {
         gain_nats_per_recording: e.gain,
@@ -807,6 +917,15 @@ pub fn weather(
                             .map(edge_record),
                         edge_width: m.bands[i].width,
                         edge_width_ci95: robust.widths.get(i).copied().flatten().map(&interval),
+                        edge_width_corrected: m.bands[i]
+                            .width
+                            .zip(reading_var)
+                            .map(|(w, v)| deconvolve_width(w, v.variance)),
+                        edge_width_corrected_ci95: m.bands[i]
+                            .width
+                            .zip(robust.widths.get(i).copied().flatten())
+                            .zip(reading_var.filter(|v| v.std_error.is_finite()))
+                            .map(|((w, ci), v)| interval(deconvolve_interval(w, ci, v, t_recordings))),
                         mor_bins: vec![],
                         law: None,
                         survival_bins: vec![],
@@ -831,6 +950,8 @@ pub fn weather(
                     edge_test: None,
                     edge_width: None,
                     edge_width_ci95: None,
+                    edge_width_corrected: None,
+                    edge_width_corrected_ci95: None,
                     mor_bins: vec![],
                     law: None,
                     survival_bins: vec![],
@@ -882,6 +1003,8 @@ pub fn weather(
                 edge_test: None,
                 edge_width: None,
                 edge_width_ci95: None,
+                edge_width_corrected: None,
+                edge_width_corrected_ci95: None,
                 mor_bins: qs.iter().map(to_mor_bin).collect(),
                 law: None,
                 survival_bins: vec![],
@@ -994,6 +1117,8 @@ pub fn weather(
             residual: m.residual,
             neg_log_likelihood: m.nll,
             trials: m.trials,
+            mor_reading_noise: reading_var.map(|v| v.variance.sqrt()),
+            mor_reading_noise_reason: cx.mor_reading_variance.as_ref().err().cloned(),
         }),
         no_change_rate,
         no_change_rate_uncertainty,
@@ -1073,6 +1198,105 @@ mod tests {
         }
         assert!(ols > -0.8308 * 0.97, "OLS should be diluted: {ols}");
         assert!((fixed / -0.8308 - 1.0).abs() < 0.03, "corrected {fixed}");
+    }
+
+    #[test]
+    fn mor_reading_variance_is_the_sensors_scatter_over_their_number() {
+        // 300 recordings, MOR 20–400 m, read by two or three sensors with 7.5 %
+        // log-normal noise each (a third of them by three): the variance of a
+        // recording's mean reading is σ²/k, averaged (5 % at this size).
+        let sigma = 0.075f64;
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let noise = Normal::new(0.0, sigma).unwrap();
+        let readings: Vec<Vec<f64>> = (0..300)
+            .map(|i| {
+                let mor = 20.0 * 20f64.powf(i as f64 / 299.0);
+                let k = if i % 3 == 0 { 3 } else { 2 };
+                (0..k).map(|_| mor * noise.sample(&mut rng).exp()).collect()
+            })
+            .collect();
+        let want = sigma * sigma * (100.0 / 3.0 + 200.0 / 2.0) / 300.0;
+        let got = mor_reading_variance(&readings).unwrap();
+        assert!((got.variance / want - 1.0).abs() < 0.1, "{got:?} vs {want}");
+        // Normal theory: σ̂² on 400 degrees of freedom has a relative
+        // standard error of √(2/400) ≈ 7 %; the jackknife agrees.
+        let rel = got.std_error / got.variance;
+        assert!((0.05..0.1).contains(&rel), "{rel}");
+        // Exact readings: nothing to take out.
+        let exact: Vec<Vec<f64>> = (1..20).map(|i| vec![i as f64 * 10.0; 2]).collect();
+        let e = mor_reading_variance(&exact).unwrap();
+        assert_eq!((e.variance, e.std_error), (0.0, 0.0));
+        // One sensor, or a recording without a reading: cannot tell.
+        let one: Vec<Vec<f64>> = (1..20).map(|i| vec![i as f64 * 10.0]).collect();
+        assert!(
+            mor_reading_variance(&one)
+                .unwrap_err()
+                .contains("one visibility sensor")
+        );
+        let mut gap = exact.clone();
+        gap.push(vec![]);
+        assert!(
+            mor_reading_variance(&gap)
+                .unwrap_err()
+                .contains("rain conversion")
+        );
+        assert!(mor_reading_variance(&[vec![50.0, -1.0]]).is_err());
+    }
+
+    #[test]
+    fn deconvolved_width_undoes_the_reading_noise() {
+        // A probit edge of width w seen through N(0, v) shifts of the edge is
+        // a probit edge of width √(w² + v): deconvolution gives w back.
+        let (w, v) = (0.08f64, 0.053f64.powi(2));
+        assert!((deconvolve_width((w * w + v).sqrt(), v) - w).abs() < 1e-12);
+        // The survival over the readings, averaged over the reading error
+        // by quadrature (edge at 1): its 84.1 % and 15.9 % points, one
+        // standard width either side of the edge, give the apparent width,
+        // which is √(w² + v) to within 2 %.
+        let sf = |x: f64| {
+            let n = 4001;
+            let (mut acc, mut wsum) = (0.0, 0.0);
+            for j in 0..n {
+                let z = -6.0 + 12.0 * j as f64 / (n - 1) as f64;
+                let g = (-0.5 * z * z).exp();
+                let d = (-(v.sqrt()) * z).exp();
+                acc += g * murk_types::EdgeShape::Probit.sf((x - d) / (w * d));
+                wsum += g;
+            }
+            acc / wsum
+        };
+        let solve = |p: f64| {
+            let (mut lo, mut hi) = (0.5, 2.0);
+            for _ in 0..100 {
+                let mid = 0.5 * (lo + hi);
+                if sf(mid) > p { lo = mid } else { hi = mid }
+            }
+            0.5 * (lo + hi)
+        };
+        let (x84, x50, x16) = (solve(0.841_344_75), solve(0.5), solve(0.158_655_25));
+        let apparent = (x16 - x84) / (2.0 * x50);
+        let want = (w * w + v).sqrt();
+        assert!((apparent / want - 1.0).abs() < 0.02, "{apparent} vs {want}");
+        assert!((deconvolve_width(apparent, v) / w - 1.0).abs() < 0.03);
+        assert_eq!(deconvolve_width(0.03, v), 0.0);
+        assert_eq!(deconvolve_width(w, 0.0), w);
+        // An exactly known variance maps the ends; an uncertain one widens
+        // the interval on both sides.
+        let wa = (w * w + v).sqrt();
+        let ci = [wa * 0.9, wa * 1.1];
+        let exact = ReadingVariance {
+            variance: v,
+            std_error: 0.0,
+        };
+        let [lo, hi] = deconvolve_interval(wa, ci, exact, 2.0);
+        assert!((lo - deconvolve_width(ci[0], v)).abs() < 1e-12);
+        assert!((hi - deconvolve_width(ci[1], v)).abs() < 1e-12);
+        let noisy = ReadingVariance {
+            variance: v,
+            std_error: 0.3 * v,
+        };
+        let [lo2, hi2] = deconvolve_interval(wa, ci, noisy, 2.0);
+        assert!(lo2 < lo && hi2 > hi, "{lo2} {hi2} vs {lo} {hi}");
     }
 
     #[test]

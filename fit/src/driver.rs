@@ -48,6 +48,11 @@ pub struct RecordingInput {
     pub class: WeatherClass,
     /// MOR, metres, when the visibility sensors gave one.
     pub mor: Option<f64>,
+    /// Every non-empty reading of the rule set's visibility (MOR) columns,
+    /// metres, of which `mor` is the mean: their disagreement measures the
+    /// reading noise that widens the edge the survival fit sees (see
+    /// `SlopeBand::edge_width_corrected` in murk-types).
+    pub mor_readings: Vec<f64>,
     /// Rain rate, mm/h, when known (the rule set's first non-empty gauge).
     pub rain_rate: Option<f64>,
     /// Every non-empty reading of the rule set's rain-rate gauges, mm/h: their
@@ -91,6 +96,13 @@ impl FitInputs {
                     id: r.id().to_string(),
                     class: r.class()?,
                     mor: r.mor(),
+                    mor_readings: campaign
+                        .rules()
+                        .intensity()
+                        .iter()
+                        .filter_map(|c| r.value(c).and_then(|v| v.as_f64()))
+                        .filter(|v| v.is_finite())
+                        .collect(),
                     rain_rate: r.rain_rate(),
                     rain_readings: campaign
                         .rules()

@@ -87,7 +87,7 @@ use crate::{FitError, FitParams, FitValidParams, FittedTable, TOOL};
 
 /// Version of the state file layout; a state of another format is refused.
 /// Format 2: the parameters gained `compare_laws`; format 3:
-/// `reference_min_agreement`.
+/// `reference_min_agreement` and the recordings' MOR readings.
 pub const STATE_FORMAT: u32 = 3;
 
 const MAGIC: &[u8; 8] = b"MURKFITS";

@@ -244,6 +244,18 @@ pub struct SlopeBand {
     /// 95 % interval of `edge_width` over recordings.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub edge_width_ci95: Option<Interval>,
+    /// `edge_width` is the edge as the fit sees it, in range over the MOR
+    /// *readings*; noisy readings widen it (a recording's edge moves with
+    /// its reading error). This is the width with that noise taken out,
+    /// `√(edge_width² − v)` with `v` the square of
+    /// [`SurvivalFit::mor_reading_noise`]: the edge at a known MOR. Absent
+    /// when the reading noise is unknown (see
+    /// [`SurvivalFit::mor_reading_noise_reason`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub edge_width_corrected: Option<f64>,
+    /// `edge_width_ci95` with the same correction applied to its ends.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub edge_width_corrected_ci95: Option<Interval>,
     /// Per-MOR-bin quantiles of this band (quantile estimate only).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub mor_bins: Vec<MorBin>,
@@ -500,6 +512,17 @@ pub struct SurvivalFit {
     pub neg_log_likelihood: f64,
     /// Clear returns (trials) in the likelihood.
     pub trials: u64,
+    /// Standard deviation of a recording's MOR reading error in `ln MOR`
+    /// (root mean square over the weather's recordings), from the
+    /// visibility sensors' disagreement: each sensor's scatter, pooled,
+    /// over the number of sensors a recording's MOR averages. Error the
+    /// sensors share does not show and is not in it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mor_reading_noise: Option<f64>,
+    /// Why `mor_reading_noise` is unknown (one visibility sensor, or MOR
+    /// from the rain conversion).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mor_reading_noise_reason: Option<String>,
 }
 
 /// Bootstrap uncertainty of a rate.
@@ -1151,6 +1174,8 @@ mod tests {
             edge_test: None,
             edge_width: None,
             edge_width_ci95: None,
+            edge_width_corrected: None,
+            edge_width_corrected_ci95: None,
             mor_bins: vec![],
             law: None,
             survival_bins: vec![],

@@ -36,6 +36,8 @@ fn band(min: f64, max: Option<f64>, slope: Option<f64>, bins: Vec<MorBin>) -> Sl
         edge_test: None,
         edge_width: None,
         edge_width_ci95: None,
+        edge_width_corrected: None,
+        edge_width_corrected_ci95: None,
         mor_bins: bins,
         law: None,
         survival_bins: vec![],
