@@ -131,18 +131,6 @@ pub struct ReadingVariance {
     pub std_error: f64,
 }
 
-/// The relative edge width with a MOR reading variance `v` (in `ln MOR`)
-/// taken out: `√(max(w² − v, 0))`.
-///
-/// The survival fit sees returns at `r / MOR'` with `MOR' = MOR·e^e`,
-/// `e ~ N(0, v)` per recording, so a probit edge of width `w` at the true
-/// MOR shows as one of width `√(w² + v)` (to first order in `e`; for the
-/// logistic edge, whose convolution with a normal is close to but not
-/// exactly logistic, approximately).
-pub fn deconvolve_width(w: f64, v: f64) -> f64 {
-    (w * w - v).max(0.0).sqrt()
-}
-
 /// The interval of the corrected width: the fitted width's interval
 /// `[lo, hi]` about `w`, and `t` standard errors of the reading variance,
 /// combined in quadrature in `w²` (where the correction is a subtraction),
@@ -920,7 +908,7 @@ pub fn weather(
                         edge_width_corrected: m.bands[i]
                             .width
                             .zip(reading_var)
-                            .map(|(w, v)| deconvolve_width(w, v.variance)),
+                            .map(|(w, v)| murk_types::deconvolve_edge_width(w, v.variance)),
                         edge_width_corrected_ci95: m.bands[i]
                             .width
                             .zip(robust.widths.get(i).copied().flatten())
@@ -1248,7 +1236,7 @@ mod tests {
         // A probit edge of width w seen through N(0, v) shifts of the edge is
         // a probit edge of width √(w² + v): deconvolution gives w back.
         let (w, v) = (0.08f64, 0.053f64.powi(2));
-        assert!((deconvolve_width((w * w + v).sqrt(), v) - w).abs() < 1e-12);
+        assert!((murk_types::deconvolve_edge_width((w * w + v).sqrt(), v) - w).abs() < 1e-12);
         // The survival over the readings, averaged over the reading error
         // by quadrature (edge at 1): its 84.1 % and 15.9 % points, one
         // standard width either side of the edge, give the apparent width,
@@ -1277,9 +1265,9 @@ mod tests {
         let apparent = (x16 - x84) / (2.0 * x50);
         let want = (w * w + v).sqrt();
         assert!((apparent / want - 1.0).abs() < 0.02, "{apparent} vs {want}");
-        assert!((deconvolve_width(apparent, v) / w - 1.0).abs() < 0.03);
-        assert_eq!(deconvolve_width(0.03, v), 0.0);
-        assert_eq!(deconvolve_width(w, 0.0), w);
+        assert!((murk_types::deconvolve_edge_width(apparent, v) / w - 1.0).abs() < 0.03);
+        assert_eq!(murk_types::deconvolve_edge_width(0.03, v), 0.0);
+        assert_eq!(murk_types::deconvolve_edge_width(w, 0.0), w);
         // An exactly known variance maps the ends; an uncertain one widens
         // the interval on both sides.
         let wa = (w * w + v).sqrt();
@@ -1289,8 +1277,8 @@ mod tests {
             std_error: 0.0,
         };
         let [lo, hi] = deconvolve_interval(wa, ci, exact, 2.0);
-        assert!((lo - deconvolve_width(ci[0], v)).abs() < 1e-12);
-        assert!((hi - deconvolve_width(ci[1], v)).abs() < 1e-12);
+        assert!((lo - murk_types::deconvolve_edge_width(ci[0], v)).abs() < 1e-12);
+        assert!((hi - murk_types::deconvolve_edge_width(ci[1], v)).abs() < 1e-12);
         let noisy = ReadingVariance {
             variance: v,
             std_error: 0.3 * v,

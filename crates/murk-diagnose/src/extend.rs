@@ -169,13 +169,14 @@ impl FittedTerm {
         if let Some(w) = table.weathers.get_mut(&weather) {
             w.extensions.push(self.term.clone());
             if let Some(r) = self.edge {
+                let noise = w.survival.as_ref().and_then(|s| s.mor_reading_noise);
                 for b in w.vanishing_slope.iter_mut() {
-                    if let Some(e) = b.edge_width.as_mut() {
-                        *e *= r.width_factor;
-                    }
+                    b.scale_edge_width(r.width_factor, noise);
                 }
                 if let Some(s) = w.survival.as_mut() {
                     s.dropout = r.dropout;
+                    // The interval was the baseline's dropout's.
+                    s.dropout_ci95 = None;
                     s.residual = r.residual;
                 }
             }

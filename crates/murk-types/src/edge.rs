@@ -136,6 +136,27 @@ impl FromStr for EdgeShape {
     }
 }
 
+/// The relative edge width with a MOR reading variance `v` (in `ln MOR`)
+/// taken out: `√(max(w² − v, 0))` — the one owner of this correction (the
+/// fit writes `edge_width_corrected` with it, `murk diagnose` recomputes
+/// it when a term rescales the width).
+///
+/// A fit sees returns at `r / MOR'` with `MOR' = MOR·e^e`, `e ~ N(0, v)`
+/// per recording, so a probit edge of width `w` at the true MOR shows as
+/// one of width `√(w² + v)` (to first order in `e`; for the logistic edge,
+/// whose convolution with a normal is close to but not exactly logistic,
+/// approximately).
+///
+/// ```
+/// let (w, v) = (0.08f64, 0.0028);
+/// let seen = (w * w + v).sqrt();
+/// assert!((murk_types::deconvolve_edge_width(seen, v) - w).abs() < 1e-12);
+/// assert_eq!(murk_types::deconvolve_edge_width(0.03, v), 0.0);
+/// ```
+pub fn deconvolve_edge_width(w: f64, v: f64) -> f64 {
+    (w * w - v).max(0.0).sqrt()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

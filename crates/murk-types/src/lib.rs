@@ -63,7 +63,7 @@ pub use atomic::{
 };
 pub use bins::nice_step;
 pub use cloud::PointCloud;
-pub use edge::{EdgeShape, LOGISTIC_UNIT};
+pub use edge::{EdgeShape, LOGISTIC_UNIT, deconvolve_edge_width};
 pub use error::TypesError;
 pub use extension::{
     COUNT_POINT_COVARIATES, COUNT_RAY_COVARIATES, CovariateValue, ExtensionFunction,

@@ -915,6 +915,20 @@ impl SlopeBand {
         reflectivity >= self.reflectivity_min
             && self.reflectivity_max.is_none_or(|m| reflectivity < m)
     }
+
+    /// Scales `edge_width` by `factor` (an edge re-fitted beside a model
+    /// extension): `edge_width_corrected` follows it, with the survival
+    /// fit's `mor_reading_noise` taken out again, and the intervals, which
+    /// were the fitted width's, go.
+    pub fn scale_edge_width(&mut self, factor: f64, mor_reading_noise: Option<f64>) {
+        if let Some(e) = self.edge_width.as_mut() {
+            *e *= factor;
+            self.edge_width_corrected =
+                mor_reading_noise.map(|n| crate::deconvolve_edge_width(*e, n * n));
+            self.edge_width_ci95 = None;
+            self.edge_width_corrected_ci95 = None;
+        }
+    }
 }
 
 impl CoefficientTable {
@@ -1219,6 +1233,34 @@ mod tests {
             count_law_reason: None,
             count_law_choice: None,
         }
+    }
+
+    #[test]
+    fn a_rescaled_edge_width_carries_its_correction_and_drops_its_intervals() {
+        let ci = Interval {
+            low: 0.08,
+            high: 0.11,
+            level: 0.95,
+            method: "x".into(),
+        };
+        let mut b = band(0.0, None, 0.3);
+        b.edge_width = Some(0.095);
+        b.edge_width_ci95 = Some(ci.clone());
+        b.edge_width_corrected = Some(0.079);
+        b.edge_width_corrected_ci95 = Some(ci);
+        b.scale_edge_width(1.2, Some(0.053));
+        let w = 0.095 * 1.2;
+        assert!((b.edge_width.unwrap() - w).abs() < 1e-15);
+        let want = (w * w - 0.053 * 0.053).sqrt();
+        assert!((b.edge_width_corrected.unwrap() - want).abs() < 1e-15);
+        assert!(b.edge_width_ci95.is_none() && b.edge_width_corrected_ci95.is_none());
+        // Without a known reading noise there is no corrected width.
+        b.scale_edge_width(1.0, None);
+        assert!(b.edge_width_corrected.is_none());
+        // Without a width nothing changes.
+        let mut none = band(0.0, None, 0.3);
+        none.scale_edge_width(2.0, Some(0.05));
+        assert_eq!(none, band(0.0, None, 0.3));
     }
 
     fn table() -> CoefficientTable {
