@@ -128,14 +128,18 @@ pub(crate) fn assemble_table(parts: Parts<'_>) -> Result<FittedTable, FitError> 
             rain: (class == WeatherClass::Rain)
                 .then(|| conversion.clone())
                 .flatten(),
-            mor_reading_variance: crate::assemble::mor_reading_variance(
-                &inputs
-                    .recordings
-                    .iter()
-                    .filter(|r| r.class == class)
-                    .map(|r| r.mor_readings.clone())
-                    .collect::<Vec<_>>(),
-            ),
+            mor_reading_variance: {
+                // The recordings the weather's fit holds (not the excluded
+                // ones), in campaign order (a row's index is its job's).
+                let mut held: Vec<usize> = acc.rows.iter().map(|r| r.index).collect();
+                held.sort_unstable();
+                crate::assemble::mor_reading_variance(
+                    &held
+                        .iter()
+                        .map(|&j| degraded.jobs[j].input.mor_readings.clone())
+                        .collect::<Vec<_>>(),
+                )
+            },
         };
         let (c, d) = weather(acc, &cx);
         weathers.insert(class, c);
