@@ -92,25 +92,22 @@ impl FitInputs {
             .iter()
             .filter(|r| r.kept())
             .filter_map(|r| {
+                // The finite readings of `columns` (the visibility or the
+                // rain-rate columns of the rule set).
+                let readings = |columns: &[String]| -> Vec<f64> {
+                    columns
+                        .iter()
+                        .filter_map(|c| r.value(c).and_then(|v| v.as_f64()))
+                        .filter(|v| v.is_finite())
+                        .collect()
+                };
                 Some(RecordingInput {
                     id: r.id().to_string(),
                     class: r.class()?,
                     mor: r.mor(),
-                    mor_readings: campaign
-                        .rules()
-                        .intensity()
-                        .iter()
-                        .filter_map(|c| r.value(c).and_then(|v| v.as_f64()))
-                        .filter(|v| v.is_finite())
-                        .collect(),
+                    mor_readings: readings(campaign.rules().intensity()),
                     rain_rate: r.rain_rate(),
-                    rain_readings: campaign
-                        .rules()
-                        .rain_rate()
-                        .iter()
-                        .filter_map(|c| r.value(c).and_then(|v| v.as_f64()))
-                        .filter(|v| v.is_finite())
-                        .collect(),
+                    rain_readings: readings(campaign.rules().rain_rate()),
                     lidar: r.lidar().path.clone(),
                     radar: r.radar().map(Path::to_path_buf),
                 })
