@@ -104,20 +104,19 @@ pub fn mor_reading_variance(readings: &[Vec<f64>]) -> Result<ReadingVariance, St
     let n = parts.len() as f64;
     let estimate = |ss: f64, dof: usize, inv_k: f64, n: f64| ss / dof as f64 * inv_k / n;
     let variance = estimate(ss, dof, inv_k, n);
-    // Delete-one jackknife over recordings (a left-out recording that held
-    // the only degrees of freedom leaves nothing: no error then).
-    let loo: Vec<f64> = parts
-        .iter()
-        .filter(|p| dof > p.1)
-        .map(|p| estimate(ss - p.0, dof - p.1, inv_k - p.2, n - 1.0))
-        .collect();
-    let std_error = (loo.len() >= 2 && loo.len() == parts.len()).then(|| {
+    // Delete-one jackknife over recordings (no error when one recording
+    // holds every degree of freedom: leaving it out leaves nothing).
+    let std_error = (parts.len() >= 2 && parts.iter().all(|p| p.1 < dof)).then(|| {
+        let loo: Vec<f64> = parts
+            .iter()
+            .map(|p| estimate(ss - p.0, dof - p.1, inv_k - p.2, n - 1.0))
+            .collect();
         let m = loo.iter().sum::<f64>() / n;
         ((n - 1.0) / n * loo.iter().map(|v| (v - m).powi(2)).sum::<f64>()).sqrt()
     });
     Ok(ReadingVariance {
         variance,
-        std_error: std_error.unwrap_or(f64::INFINITY),
+        std_error,
     })
 }
 
@@ -126,18 +125,17 @@ pub fn mor_reading_variance(readings: &[Vec<f64>]) -> Result<ReadingVariance, St
 pub struct ReadingVariance {
     /// Mean variance of a recording's MOR reading error in `ln MOR`.
     pub variance: f64,
-    /// Its standard error over recordings (infinite when one recording
+    /// Its standard error over recordings (`None` when one recording
     /// holds every degree of freedom).
-    pub std_error: f64,
+    pub std_error: Option<f64>,
 }
 
 /// The interval of the corrected width: the fitted width's interval
-/// `[lo, hi]` about `w`, and `t` standard errors of the reading variance,
-/// combined in quadrature in `w²` (where the correction is a subtraction),
-/// then deconvolved.
-pub fn deconvolve_interval(w: f64, [lo, hi]: [f64; 2], v: ReadingVariance, t: f64) -> [f64; 2] {
-    let dv = t * v.std_error;
-    let c = w * w - v.variance;
+/// `[lo, hi]` about `w`, and `t` standard errors `dv` of the reading
+/// variance `v`, combined in quadrature in `w²` (where the correction is a
+/// subtraction), then deconvolved.
+pub fn deconvolve_interval(w: f64, [lo, hi]: [f64; 2], v: f64, dv: f64) -> [f64; 2] {
+    let c = w * w - v;
     let down = c - ((w * w - lo * lo).powi(2) + dv * dv).sqrt();
     let up = c + ((hi * hi - w * w).powi(2) + dv * dv).sqrt();
     [down.max(0.0).sqrt(), up.max(0.0).sqrt()]
@@ -912,8 +910,10 @@ pub fn weather(
                         edge_width_corrected_ci95: m.bands[i]
                             .width
                             .zip(robust.widths.get(i).copied().flatten())
-                            .zip(reading_var.filter(|v| v.std_error.is_finite()))
-                            .map(|((w, ci), v)| interval(deconvolve_interval(w, ci, v, t_recordings))),
+                            .zip(reading_var.and_then(|v| Some((v.variance, v.std_error?))))
+                            .map(|((w, ci), (v, se))| {
+                                interval(deconvolve_interval(w, ci, v, t_recordings * se))
+                            }),
                         mor_bins: vec![],
                         law: None,
                         survival_bins: vec![],
@@ -1208,12 +1208,12 @@ mod tests {
         assert!((got.variance / want - 1.0).abs() < 0.1, "{got:?} vs {want}");
         // Normal theory: σ̂² on 400 degrees of freedom has a relative
         // standard error of √(2/400) ≈ 7 %; the jackknife agrees.
-        let rel = got.std_error / got.variance;
+        let rel = got.std_error.unwrap() / got.variance;
         assert!((0.05..0.1).contains(&rel), "{rel}");
         // Exact readings: nothing to take out.
         let exact: Vec<Vec<f64>> = (1..20).map(|i| vec![i as f64 * 10.0; 2]).collect();
         let e = mor_reading_variance(&exact).unwrap();
-        assert_eq!((e.variance, e.std_error), (0.0, 0.0));
+        assert_eq!((e.variance, e.std_error), (0.0, Some(0.0)));
         // One sensor, or a recording without a reading: cannot tell.
         let one: Vec<Vec<f64>> = (1..20).map(|i| vec![i as f64 * 10.0]).collect();
         assert!(
@@ -1272,18 +1272,10 @@ mod tests {
         // the interval on both sides.
         let wa = (w * w + v).sqrt();
         let ci = [wa * 0.9, wa * 1.1];
-        let exact = ReadingVariance {
-            variance: v,
-            std_error: 0.0,
-        };
-        let [lo, hi] = deconvolve_interval(wa, ci, exact, 2.0);
+        let [lo, hi] = deconvolve_interval(wa, ci, v, 2.0 * 0.0);
         assert!((lo - murk_types::deconvolve_edge_width(ci[0], v)).abs() < 1e-12);
         assert!((hi - murk_types::deconvolve_edge_width(ci[1], v)).abs() < 1e-12);
-        let noisy = ReadingVariance {
-            variance: v,
-            std_error: 0.3 * v,
-        };
-        let [lo2, hi2] = deconvolve_interval(wa, ci, noisy, 2.0);
+        let [lo2, hi2] = deconvolve_interval(wa, ci, v, 2.0 * 0.3 * v);
         assert!(lo2 < lo && hi2 > hi, "{lo2} {hi2} vs {lo} {hi}");
     }
 
