@@ -100,7 +100,7 @@ impl Applier {
     /// The vanishing distance (metres) of a return of calibrated
     /// reflectivity `reflectivity` (clamped into the lowest / highest band).
     pub fn vanishing_distance_m(&self, reflectivity: f64) -> f64 {
-        self.bands[self.band_index(reflectivity)].vanishing_distance_m
+        self.bands[self.band_index(reflectivity)].distance_at(reflectivity)
     }
 
     /// What is applied, for reports.
@@ -170,6 +170,9 @@ impl Applier {
 
     fn vanish(&self, cloud: &PointCloud, key: &str, mask: &mut Vec<u8>) -> Vec<kernel::Counts> {
         match &self.soft {
+            None if self.bands.iter().any(|b| b.reflectivity.is_some()) => {
+                kernel::hard_mask_by_reflectivity(&self.bands, cloud, mask)
+            }
             None => kernel::hard_mask(&Hard::new(&self.bands, cloud.intensity_scale), cloud, mask),
             Some(s) => kernel::soft_mask(
                 &self.bands,

@@ -113,7 +113,7 @@ impl Applier {
             return 1.0;
         }
         let b = &self.bands[self.band_index(reflectivity)];
-        let d = b.vanishing_distance_m * distance_factor;
+        let d = b.distance_at(reflectivity) * distance_factor;
         match &self.soft {
             None => {
                 if range_m <= d {

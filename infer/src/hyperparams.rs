@@ -467,6 +467,11 @@ impl ApplyParams {
             let law = borrowed
                 .and_then(|(_, f)| f.vanishing_law())
                 .or(b.vanishing_law());
+            // A reflectivity term carries the edge width fitted with it.
+            let b_edge_width = law
+                .and_then(|l| l.reflectivity())
+                .and_then(|r| r.edge_width)
+                .or(b_edge_width);
             let slope = match law {
                 Some(l) => l.effective_slope(mor),
                 None if identity => f64::NAN,
@@ -500,6 +505,11 @@ impl ApplyParams {
                 slope,
                 vanishing_distance_m: slope * mor * range_scale,
                 edge_width: b_edge_width,
+                reflectivity: if identity {
+                    None
+                } else {
+                    law.and_then(|l| l.reflectivity())
+                },
             });
         }
         Ok(bands)

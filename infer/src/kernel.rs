@@ -247,6 +247,44 @@ pub(crate) fn hard_mask(h: &Hard, cloud: &PointCloud, mask: &mut Vec<u8>) -> Vec
         .collect()
 }
 
+/// Hard-threshold mask when a band's law has a reflectivity term: each
+/// point's distance is its band's times the term's factor at its own
+/// calibrated reflectivity ([`BandRule::distance_at`]), so the per-band
+/// squared thresholds of [`hard_mask`] do not apply. Same counts, same
+/// chunks.
+pub(crate) fn hard_mask_by_reflectivity(
+    bands: &[BandRule],
+    cloud: &PointCloud,
+    mask: &mut Vec<u8>,
+) -> Vec<Counts> {
+    let scale = cloud.intensity_scale;
+    let edges = Edges::new(bands, scale);
+    mask.clear();
+    mask.resize(cloud.len(), 0);
+    mask.par_chunks_mut(CHUNK)
+        .enumerate()
+        .map(|(c, m)| {
+            let s = c * CHUNK;
+            let mut counts = Counts {
+                n: m.len() as u64,
+                ..Counts::default()
+            };
+            for (j, slot) in m.iter_mut().enumerate() {
+                let i = s + j;
+                let raw = cloud.intensity[i];
+                let b = edges.band_of(raw);
+                let r = (cloud.x[i] as f64)
+                    .hypot(cloud.y[i] as f64)
+                    .hypot(cloud.z[i] as f64);
+                let keep = r <= bands[b].distance_at(scale.to_calibrated(raw) as f64);
+                *slot = keep as u8;
+                counts.add_point(&edges, raw, keep);
+            }
+            counts
+        })
+        .collect()
+}
+
 /// Soft-edge mask: each point survives with the fitted probability, drawn
 /// from the chunk's own stream.
 pub(crate) fn soft_mask(
@@ -281,23 +319,36 @@ pub(crate) fn soft_mask(
                 let r = (cloud.x[i] as f64)
                     .hypot(cloud.y[i] as f64)
                     .hypot(cloud.z[i] as f64);
-                let zc = (r - centre[b]) / width[b];
+                // The edge's centre and width both scale with a
+                // reflectivity term's factor (the width is relative).
+                let f = bands[b].reflectivity.map_or(1.0, |t| {
+                    t.factor(cloud.intensity_scale.to_calibrated(raw) as f64)
+                });
+                let zc = (r - centre[b] * f) / (width[b] * f);
                 let p = soft.keep_probability_given_clear(zc);
                 let u: f64 = rng.random();
                 let keep = u < p;
                 *slot = keep as u8;
-                counts.kept += keep as u64;
-                let key = edges.sign * raw;
-                for k in 0..edges.bands {
-                    let g = key >= edges.lower[k];
-                    counts.ge[k] += g as u64;
-                    counts.ge_kept[k] += (g & keep) as u64;
-                }
-                counts.above += (key >= edges.upper) as u64;
+                counts.add_point(&edges, raw, keep);
             }
             counts
         })
         .collect()
+}
+
+impl Counts {
+    /// Counts one point of raw intensity `raw`, kept or not.
+    #[inline]
+    fn add_point(&mut self, edges: &Edges, raw: f32, keep: bool) {
+        self.kept += keep as u64;
+        let key = edges.sign * raw;
+        for k in 0..edges.bands {
+            let g = key >= edges.lower[k];
+            self.ge[k] += g as u64;
+            self.ge_kept[k] += (g & keep) as u64;
+        }
+        self.above += (key >= edges.upper) as u64;
+    }
 }
 
 /// Sums chunk counts.

@@ -50,10 +50,28 @@ pub struct BandRule {
     /// the linear law, `a·MOR^(b−1)` for a law that bends
     /// ([`murk_types::VanishingLaw::effective_slope`]).
     pub slope: f64,
-    /// `slope × MOR × range_scale`, metres (infinite for the identity).
+    /// `slope × MOR × range_scale`, metres (infinite for the identity): the
+    /// distance at the band's reference reflectivity when the law has a
+    /// reflectivity term.
     pub vanishing_distance_m: f64,
     /// Relative soft-edge width, when the table has it.
     pub edge_width: Option<f64>,
+    /// The law's reflectivity term inside the band, if it has one: a return
+    /// of calibrated reflectivity `x` vanishes at
+    /// `vanishing_distance_m · factor(x)` (murk-types owns the factor).
+    pub reflectivity: Option<murk_types::ReflectivityDependence>,
+}
+
+impl BandRule {
+    /// The vanishing distance, metres, of a return of calibrated
+    /// reflectivity `x` in this band.
+    #[inline]
+    pub fn distance_at(&self, x: f64) -> f64 {
+        match &self.reflectivity {
+            None => self.vanishing_distance_m,
+            Some(r) => self.vanishing_distance_m * r.factor(x),
+        }
+    }
 }
 
 /// The fitted survival edge.

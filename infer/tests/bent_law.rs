@@ -7,7 +7,9 @@ mod common;
 
 use common::*;
 use murk_infer::{ApplyParams, Severity};
-use murk_types::{CoefficientTable, EdgeShape, PointCloud, VanishingLaw, WeatherClass};
+use murk_types::{
+    CoefficientTable, EdgeShape, PointCloud, ReflectivityDependence, VanishingLaw, WeatherClass,
+};
 
 const A: f64 = 1.6;
 const B: f64 = 0.72;
@@ -16,7 +18,11 @@ fn bent_table() -> CoefficientTable {
     let mut t = seed_table();
     let fog = t.weathers.get_mut(&WeatherClass::Fog).unwrap();
     for b in &mut fog.vanishing_slope {
-        b.law = Some(VanishingLaw::Power { a: A, b: B });
+        b.law = Some(VanishingLaw::Power {
+            a: A,
+            b: B,
+            reflectivity: None,
+        });
     }
     if let Some(s) = fog.survival.as_mut() {
         s.dropout = 0.0;
@@ -110,7 +116,102 @@ fn a_bad_law_is_refused_naming_the_field() {
         .get_mut(&WeatherClass::Fog)
         .unwrap()
         .vanishing_slope[1]
-        .law = Some(VanishingLaw::Power { a: 0.0, b: 0.7 });
+        .law = Some(VanishingLaw::Power {
+        a: 0.0,
+        b: 0.7,
+        reflectivity: None,
+    });
     let e = t.to_json().unwrap_err().to_string();
     assert!(e.contains("weathers.fog.vanishing_slope[1].law"), "{e}");
+}
+
+fn reflectivity_table(edge_width: Option<f64>) -> CoefficientTable {
+    let mut t = seed_table();
+    let fog = t.weathers.get_mut(&WeatherClass::Fog).unwrap();
+    for b in &mut fog.vanishing_slope {
+        b.law = Some(VanishingLaw::Power {
+            a: A,
+            b: B,
+            reflectivity: Some(ReflectivityDependence {
+                exponent: K,
+                reference: X_REF,
+                floor: 1.0,
+                edge_width,
+            }),
+        });
+    }
+    if let Some(s) = fog.survival.as_mut() {
+        s.dropout = 0.0;
+        s.residual = 0.0;
+    }
+    CoefficientTable::from_json(&t.to_json().unwrap()).unwrap()
+}
+
+const K: f64 = 0.2;
+const X_REF: f64 = 20.0;
+
+/// With a reflectivity term each return has its own distance
+/// `A·MOR^B·(max(x, 1)/20)^0.2`: hard edge, returns of several
+/// reflectivities in both bands (and one below the floor) kept exactly
+/// inside their own distance; the applier reports the same distance.
+#[test]
+fn hard_edge_places_each_return_by_its_reflectivity() {
+    let t = reflectivity_table(None);
+    for mor in [20.0, 60.0, 200.0] {
+        let a = ApplyParams::new(WeatherClass::Fog, Severity::Mor(mor))
+            .build(&t)
+            .unwrap();
+        let mut c = PointCloud::with_capacity(0);
+        let mut want = Vec::new();
+        let mut k = 0u16;
+        for refl in [0.0f32, 2.0, 7.0, 12.0, 60.0, 200.0] {
+            let d = A * f64::powf(mor, B) * ((refl as f64).max(1.0) / X_REF).powf(K);
+            assert!(
+                (a.vanishing_distance_m(refl as f64) - d).abs() < 1e-9 * d,
+                "MOR {mor} x {refl}"
+            );
+            for f in [0.5, 0.98, 1.02, 2.0] {
+                c.push((f * d) as f32, 0.0, 0.0, refl, k);
+                if f < 1.0 {
+                    want.push(k);
+                }
+                k += 1;
+            }
+        }
+        let (out, summary) = a.apply(&c, "refl").unwrap();
+        assert_eq!(out.ring, want, "MOR {mor}");
+        assert_eq!(summary.points_out as usize, want.len());
+    }
+}
+
+/// Soft edge with the width the term carries (0.05, not the band's 0.1):
+/// at reflectivity 80 the kept share at `D(80)·(1 + 0.05·z)` is `1 − Φ(z)`.
+#[test]
+fn soft_edge_uses_the_terms_own_distance_and_width() {
+    let t = reflectivity_table(Some(0.05));
+    let mor = 80.0;
+    let x = 80.0f32;
+    let d = A * f64::powf(mor, B) * (x as f64 / X_REF).powf(K);
+    let a = ApplyParams::new(WeatherClass::Fog, Severity::Mor(mor))
+        .soft_edge(true)
+        .seed(3)
+        .build(&t)
+        .unwrap();
+    for z in [-1.0, 0.0, 1.0] {
+        let n = 20_000;
+        let r = d * (1.0 + 0.05 * z);
+        let mut c = PointCloud::with_capacity(n);
+        for i in 0..n {
+            let az = i as f64 * 1e-4;
+            c.push((r * az.cos()) as f32, (r * az.sin()) as f32, 0.0, x, 0);
+        }
+        let (out, _) = a.apply(&c, &format!("soft-refl-{z}")).unwrap();
+        let got = out.len() as f64 / n as f64;
+        let want = EdgeShape::Probit.sf(z);
+        let se = (want * (1.0 - want) / n as f64).sqrt();
+        assert!(
+            (got - want).abs() < 4.0 * se + 1e-3,
+            "z {z}: {got} vs {want}"
+        );
+    }
 }

@@ -65,9 +65,26 @@ pub fn range_mor_lines(c: &WeatherCoefficients, range_scale: f64) -> RangeMorLin
         match (b.slope, b.law) {
             // A band with a bent law: the law apply uses is drawn; the
             // line's slope, kept in the table, is said.
-            (Some(s), Some(murk_types::VanishingLaw::Power { a, b: e })) => {
+            (
+                Some(s),
+                Some(murk_types::VanishingLaw::Power {
+                    a,
+                    b: e,
+                    reflectivity,
+                }),
+            ) => {
                 out.lines.push(SlopeLine {
-                    label: format!("law {band} = {}·MOR^{}", short(a), short(e)),
+                    label: match reflectivity {
+                        None => format!("law {band} = {}·MOR^{}", short(a), short(e)),
+                        // Drawn at the reference reflectivity.
+                        Some(r) => format!(
+                            "law {band} = {}·MOR^{}·(x/{})^{}",
+                            short(a),
+                            short(e),
+                            short(r.reference),
+                            short(r.exponent)
+                        ),
+                    },
                     slope: a * range_scale,
                     exponent: e,
                     group: g,

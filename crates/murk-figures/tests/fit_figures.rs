@@ -96,7 +96,11 @@ fn range_scale_is_drawn_and_said() {
 #[test]
 fn a_bent_law_is_drawn_as_the_law_and_the_line_is_said() {
     let mut fog = common::fog();
-    fog.vanishing_slope[0].law = Some(murk_types::VanishingLaw::Power { a: 1.5, b: 0.7 });
+    fog.vanishing_slope[0].law = Some(murk_types::VanishingLaw::Power {
+        a: 1.5,
+        b: 0.7,
+        reflectivity: None,
+    });
     fog.law_choice = Some(murk_types::LawChoice {
         chosen: "power".into(),
         exponents: vec![Some(0.7), None],
@@ -108,6 +112,7 @@ fn a_bent_law_is_drawn_as_the_law_and_the_line_is_said() {
         alpha: 0.01,
         folds: 5,
         reason: None,
+        reflectivity: None,
     });
     let l = range_mor_lines(&fog, 1.0);
     let bent = l

@@ -76,10 +76,10 @@ pub use lidar::LidarSpec;
 pub use table::{
     ClearCoefficients, CoefficientTable, CountLaw, CountLawChoice, CountUnit, EdgeTest,
     ExcludedRecording, Gaussian, InputDigest, Interval, LackOfFit, LawChoice, MorBin, NoiseLaw,
-    Provenance, RadarCoefficients, RainConversion, ReturnMoments, RingGeometry, SensorGeometry,
-    SlopeBand, SurvivalBin, SurvivalFit, SweepBand, TABLE_FORMAT, TableLidar, Uncertainty,
-    WeatherCoefficients,
+    Provenance, RadarCoefficients, RainConversion, ReflectivityChoice, ReturnMoments, RingGeometry,
+    SensorGeometry, SlopeBand, SurvivalBin, SurvivalFit, SweepBand, TABLE_FORMAT, TableLidar,
+    Uncertainty, WeatherCoefficients,
 };
-pub use vanishing::VanishingLaw;
+pub use vanishing::{ReflectivityDependence, VanishingLaw};
 pub use walk::{LeftOut, Walk, WalkedFile, walk_folder};
 pub use weather::WeatherClass;

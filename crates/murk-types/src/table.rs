@@ -261,7 +261,8 @@ pub struct SlopeBand {
     pub mor_bins: Vec<MorBin>,
     /// The vanishing law appliers use when it is not the linear law of
     /// `slope` (survival fit only): a law that bends, `a·MOR^b`, chosen over
-    /// the line on held-out recordings (see
+    /// the line on held-out recordings, possibly with a reflectivity term
+    /// inside the band (`·(x/x_ref)^k`, chosen the same way; see
     /// [`WeatherCoefficients::law_choice`]). Absent: the line `slope·MOR`.
     /// `slope` stays the linear fit either way, so published tables can be
     /// re-derived. Use [`SlopeBand::vanishing_law`].
@@ -308,7 +309,10 @@ pub struct SurvivalBin {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub line_m: Option<f64>,
     /// The applied law's (`law`, or the line) 50 %-survival range at
-    /// `mor_m`, metres.
+    /// `mor_m`, metres. With a reflectivity term each return has its own
+    /// distance, so this is the 50 % crossing of the law's survival over
+    /// the bin's own clear returns, pooled by range as
+    /// `half_survival_range_m` is (the law's prediction of that number).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub law_m: Option<f64>,
     /// Why `half_survival_range_m` or its interval is null.
@@ -380,6 +384,51 @@ pub struct LawChoice {
     /// Folds over recordings.
     pub folds: u32,
     /// Why the comparison could not be made, if it could not.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
+    /// The held-out comparison of a reflectivity term inside each band
+    /// with the law chosen above (absent when it was not asked for: murk
+    /// fit's `reflectivity_law`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reflectivity: Option<ReflectivityChoice>,
+}
+
+/// Does a band's vanishing distance grow with reflectivity inside the band?
+///
+/// Each band's law is refitted with `(max(x, floor)/x_ref)^k` beside it
+/// (`x` the return's clear reflectivity, `x_ref` the geometric mean of the
+/// band's trials; `k` and, when the law bends, its exponent profiled by
+/// maximum likelihood) and compared with the law without it on held-out
+/// recordings, as [`LawChoice`] compares the bend with the line. Chosen
+/// (and written into each band's `law` when murk fit's `apply_bend` is on)
+/// when the mean gain is positive with a one-sided sign-flip p-value
+/// `≤ alpha`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ReflectivityChoice {
+    /// True when the term predicts held-out recordings significantly
+    /// better.
+    pub chosen: bool,
+    /// Per band, its exponent `k` fitted on all recordings (null for a
+    /// band without a slope, or one whose reflectivities do not spread).
+    pub exponents: Vec<Option<f64>>,
+    /// Per band, the 95 % grouped-jackknife interval of `k` over the
+    /// comparison's folds.
+    pub exponent_ci95: Vec<Option<Interval>>,
+    /// Per band, the reference reflectivity `x_ref`.
+    pub references: Vec<Option<f64>>,
+    /// Reflectivities below count as this one.
+    pub floor: f64,
+    /// Mean held-out gain over the law without the term, nats per
+    /// recording.
+    pub gain_nats_per_recording: f64,
+    /// Recordings the term predicted better.
+    pub recordings_better: u32,
+    /// Recordings compared.
+    pub recordings: u32,
+    /// One-sided sign-flip p-value of the mean gain.
+    pub p_value: f64,
+    /// Why the comparison could not be made, or why a chosen term is not
+    /// applied.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reason: Option<String>,
 }

@@ -6,6 +6,7 @@
 //! ```text
 //! linear (the seed's law):  D = s · MOR · ρ
 //! power (a law that bends): D = a · MOR^b · ρ
+//! with reflectivity:        D = a · MOR^b · ρ · (max(x, x₀) / x_ref)^k
 //! ```
 //!
 //! with `ρ` the sensor's range scale. `b = 1` is the linear law with
@@ -17,8 +18,33 @@
 //! [`VanishingLaw::effective_slope`] (the slope of the line through the
 //! origin that gives the same distance at that MOR, which is what an applier
 //! built for the linear law needs), so a table's law is applied the same way
-//! everywhere. Tables store it as `{"kind": "power", "a": …, "b": …}`; a band
-//! without a `law` field has the linear law of its `slope`.
+//! everywhere; a consumer that knows the return's calibrated reflectivity
+//! `x` multiplies by [`VanishingLaw::reflectivity_factor`] (1 for a law
+//! without a reflectivity term). Tables store it as
+//! `{"kind": "power", "a": …, "b": …}`, with
+//! `"reflectivity": {"exponent": k, "reference": x_ref, "floor": x₀}` when the
+//! distance also grows with reflectivity inside the band (the lidar
+//! equation in fog gives each return its own distance by its reflectivity:
+//! the hard echo `∝ x·exp(−2αR)/R²` must outlast the fog's own echo); a
+//! band without a `law` field has the linear law of its `slope`.
+//!
+//! ```
+//! use murk_types::{ReflectivityDependence, VanishingLaw};
+//! let law = VanishingLaw::Power {
+//!     a: 2.0,
+//!     b: 0.5,
+//!     reflectivity: Some(ReflectivityDependence {
+//!         exponent: 0.5,
+//!         reference: 16.0,
+//!         floor: 1.0,
+//!         edge_width: None,
+//!     }),
+//! };
+//! // 2·100^0.5 = 20 m at the reference reflectivity; four times as
+//! // reflective reaches twice as far.
+//! assert!((law.distance_m(100.0, 1.0) - 20.0).abs() < 1e-12);
+//! assert!((law.distance_m(100.0, 1.0) * law.reflectivity_factor(64.0) - 40.0).abs() < 1e-12);
+//! ```
 
 use serde::{Deserialize, Serialize};
 
@@ -38,7 +64,58 @@ pub enum VanishingLaw {
         a: f64,
         /// Exponent `b` (1 is the linear law).
         b: f64,
+        /// How the distance grows with reflectivity inside the band (`None`:
+        /// one distance for the whole band).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        reflectivity: Option<ReflectivityDependence>,
     },
+}
+
+/// The factor `(max(x, floor) / reference)^exponent` by which a return of
+/// calibrated reflectivity `x` reaches further than the band's distance at
+/// its reference reflectivity.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ReflectivityDependence {
+    /// Exponent `k` of reflectivity.
+    pub exponent: f64,
+    /// Reflectivity at which the factor is 1 (the band's returns'
+    /// geometric mean, as fitted).
+    pub reference: f64,
+    /// Reflectivities below count as this one (a reflectivity of 0 would
+    /// otherwise vanish at once).
+    pub floor: f64,
+    /// The relative edge width fitted with the term, which appliers use in
+    /// place of the band's `edge_width`: the band's is the line's, which
+    /// also holds the spread of the band's reflectivities that the term
+    /// now places. `None`: the band's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub edge_width: Option<f64>,
+}
+
+impl ReflectivityDependence {
+    /// The factor at calibrated reflectivity `x` (a NaN `x` counts as the
+    /// floor).
+    #[inline]
+    pub fn factor(&self, x: f64) -> f64 {
+        (x.max(self.floor) / self.reference).powf(self.exponent)
+    }
+
+    /// Why the term cannot be applied, if it cannot.
+    pub fn check(&self) -> Result<(), String> {
+        if !(self.exponent.is_finite()
+            && self.reference.is_finite()
+            && self.reference > 0.0
+            && self.floor.is_finite()
+            && self.floor > 0.0
+            && self.edge_width.is_none_or(|w| w.is_finite() && w > 0.0))
+        {
+            return Err(format!(
+                "reflectivity exponent {}, reference {}, floor {}, edge width {:?}: the exponent must be finite, the reference, floor and edge width finite and > 0",
+                self.exponent, self.reference, self.floor, self.edge_width
+            ));
+        }
+        Ok(())
+    }
 }
 
 impl VanishingLaw {
@@ -55,8 +132,23 @@ impl VanishingLaw {
     pub fn effective_slope(&self, mor_m: f64) -> f64 {
         match *self {
             VanishingLaw::Linear { slope } => slope,
-            VanishingLaw::Power { a, b } => a * mor_m.powf(b - 1.0),
+            VanishingLaw::Power { a, b, .. } => a * mor_m.powf(b - 1.0),
         }
+    }
+
+    /// The reflectivity term, if the law has one.
+    pub fn reflectivity(&self) -> Option<ReflectivityDependence> {
+        match *self {
+            VanishingLaw::Power { reflectivity, .. } => reflectivity,
+            VanishingLaw::Linear { .. } => None,
+        }
+    }
+
+    /// How much further than [`VanishingLaw::distance_m`] a return of
+    /// calibrated reflectivity `x` reaches (1 without a reflectivity term).
+    #[inline]
+    pub fn reflectivity_factor(&self, x: f64) -> f64 {
+        self.reflectivity().map_or(1.0, |r| r.factor(x))
     }
 
     /// The exponent of MOR (1 for the linear law).
@@ -74,9 +166,13 @@ impl VanishingLaw {
             VanishingLaw::Linear { slope } if !(slope.is_finite() && slope > 0.0) => {
                 Err(format!("slope {slope} must be finite and > 0"))
             }
-            VanishingLaw::Power { a, b } if !(a.is_finite() && a > 0.0 && b.is_finite()) => {
+            VanishingLaw::Power { a, b, .. } if !(a.is_finite() && a > 0.0 && b.is_finite()) => {
                 Err(format!("a {a} must be finite and > 0, b {b} finite"))
             }
+            VanishingLaw::Power {
+                reflectivity: Some(r),
+                ..
+            } => r.check(),
             _ => Ok(()),
         }
     }
@@ -85,7 +181,16 @@ impl VanishingLaw {
     pub fn describe(&self) -> String {
         match *self {
             VanishingLaw::Linear { slope } => format!("{slope:.4}·MOR"),
-            VanishingLaw::Power { a, b } => format!("{a:.4}·MOR^{b:.3}"),
+            VanishingLaw::Power {
+                a,
+                b,
+                reflectivity: None,
+            } => format!("{a:.4}·MOR^{b:.3}"),
+            VanishingLaw::Power {
+                a,
+                b,
+                reflectivity: Some(r),
+            } => format!("{a:.4}·MOR^{b:.3}·(x/{:.3})^{:.3}", r.reference, r.exponent),
         }
     }
 }
@@ -97,7 +202,11 @@ mod tests {
     #[test]
     fn power_law_with_exponent_one_is_the_line() {
         let l = VanishingLaw::Linear { slope: 0.3 };
-        let p = VanishingLaw::Power { a: 0.3, b: 1.0 };
+        let p = VanishingLaw::Power {
+            a: 0.3,
+            b: 1.0,
+            reflectivity: None,
+        };
         for m in [10.0, 60.0, 400.0] {
             assert!((l.distance_m(m, 1.1) - p.distance_m(m, 1.1)).abs() < 1e-12);
         }
@@ -106,22 +215,82 @@ mod tests {
     #[test]
     fn known_answers() {
         // 2 · 100^0.5 = 20 m, range scale 1.5: 30 m; effective slope 0.2.
-        let p = VanishingLaw::Power { a: 2.0, b: 0.5 };
+        let p = VanishingLaw::Power {
+            a: 2.0,
+            b: 0.5,
+            reflectivity: None,
+        };
         assert!((p.distance_m(100.0, 1.5) - 30.0).abs() < 1e-12);
         assert!((p.effective_slope(100.0) - 0.2).abs() < 1e-15);
         assert_eq!(p.exponent(), 0.5);
         assert!(p.check().is_ok());
-        assert!(VanishingLaw::Power { a: -1.0, b: 1.0 }.check().is_err());
+        assert!(
+            VanishingLaw::Power {
+                a: -1.0,
+                b: 1.0,
+                reflectivity: None
+            }
+            .check()
+            .is_err()
+        );
         assert!(VanishingLaw::Linear { slope: f64::NAN }.check().is_err());
     }
 
     #[test]
     fn json_layout() {
-        let p = VanishingLaw::Power { a: 1.5, b: 0.75 };
+        let p = VanishingLaw::Power {
+            a: 1.5,
+            b: 0.75,
+            reflectivity: None,
+        };
         let j = serde_json::to_string(&p).unwrap();
         assert_eq!(j, r#"{"kind":"power","a":1.5,"b":0.75}"#);
         assert_eq!(serde_json::from_str::<VanishingLaw>(&j).unwrap(), p);
         let l: VanishingLaw = serde_json::from_str(r#"{"kind":"linear","slope":0.3}"#).unwrap();
         assert_eq!(l, VanishingLaw::Linear { slope: 0.3 });
+    }
+
+    #[test]
+    fn reflectivity_term_known_answers_and_layout() {
+        let r = ReflectivityDependence {
+            exponent: 0.25,
+            reference: 20.0,
+            floor: 2.0,
+            edge_width: None,
+        };
+        let p = VanishingLaw::Power {
+            a: 1.0,
+            b: 1.0,
+            reflectivity: Some(r),
+        };
+        // 16 times the reference: twice as far; at or below the floor the
+        // floor's factor (2/20)^0.25; NaN counts as the floor.
+        assert!((p.reflectivity_factor(320.0) - 2.0).abs() < 1e-12);
+        let f0 = 0.1f64.powf(0.25);
+        assert!((p.reflectivity_factor(0.0) - f0).abs() < 1e-12);
+        assert!((p.reflectivity_factor(f64::NAN) - f0).abs() < 1e-12);
+        assert_eq!(p.reflectivity_factor(20.0), 1.0);
+        assert_eq!(
+            VanishingLaw::Linear { slope: 0.3 }.reflectivity_factor(5.0),
+            1.0
+        );
+        assert!(p.check().is_ok());
+        let bad = VanishingLaw::Power {
+            a: 1.0,
+            b: 1.0,
+            reflectivity: Some(ReflectivityDependence { floor: 0.0, ..r }),
+        };
+        assert!(bad.check().is_err());
+        let j = serde_json::to_string(&p).unwrap();
+        assert_eq!(
+            j,
+            r#"{"kind":"power","a":1.0,"b":1.0,"reflectivity":{"exponent":0.25,"reference":20.0,"floor":2.0}}"#
+        );
+        assert_eq!(serde_json::from_str::<VanishingLaw>(&j).unwrap(), p);
+        assert!(
+            p.describe().contains("(x/20.000)^0.250"),
+            "{}",
+            p.describe()
+        );
     }
 }
