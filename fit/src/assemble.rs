@@ -2,11 +2,14 @@
 
 use murk_types::{
     CountLaw, CountLawChoice, EdgeTest, Gaussian, Interval, LackOfFit, LawChoice, MorBin, NoiseLaw,
-    RainConversion, ReturnMoments, SlopeBand, SurvivalBin, SurvivalFit, SweepBand, Uncertainty,
-    WeatherClass, WeatherCoefficients,
+    RainConversion, ReflectivityChoice, ReturnMoments, SlopeBand, SurvivalBin, SurvivalFit,
+    SweepBand, Uncertainty, WeatherClass, WeatherCoefficients,
 };
 
-use crate::bend::{Binning, compare_laws, fit_powers, half_survival, half_z, lack_of_fit};
+use crate::bend::{
+    Binning, compare_laws, compare_reflectivity, fit_powers, fit_reflectivities, half_survival,
+    half_z, lack_of_fit,
+};
 
 use crate::FitValidParams;
 use crate::accumulate::{NoiseAcc, OCCLUDER_STEP_M, WeatherAcc};
@@ -571,6 +574,74 @@ fn band_obs(acc: &WeatherAcc, partition: &Partition, band: &Band) -> Vec<crate::
     acc.survival.observations(partition.classes_in(band))
 }
 
+/// Where each reflectivity class sits in its band, for the law's
+/// reflectivity term.
+struct ReflectivityDeltas {
+    /// Per class, its mean `ln max(x, floor)` less its band's reference
+    /// (NaN for a class without reference cells: it holds no trials).
+    delta: Vec<f64>,
+    /// Per band, the reference `ln x_ref`: the trial-weighted mean of its
+    /// classes' `ln x` (NaN for a band without trials).
+    ln_reference: Vec<f64>,
+    /// The floor (the first reflectivity class edge).
+    floor: f64,
+}
+
+/// The classes' `ln x` (mean over the reference cells of each class, the
+/// cells whose trials it holds) less their band's reference; `None`
+/// without a reflectivity term.
+fn reflectivity_deltas(
+    acc: &WeatherAcc,
+    cx: &WeatherContext<'_>,
+    classes: &[std::ops::Range<usize>],
+) -> Option<ReflectivityDeltas> {
+    let floor = *cx.params.reflectivity_law_edges().first()?;
+    let n = cx.partition.classes();
+    let mut sum = vec![(0.0f64, 0u64); n];
+    for &cell in cx.reference.present() {
+        let x = cx.reference.reflectivity(cell as usize) as f64;
+        let e = &mut sum[cx.partition.class_of(x)];
+        e.0 += x.max(floor).ln();
+        e.1 += 1;
+    }
+    let ln_x: Vec<f64> = sum
+        .iter()
+        .map(|&(s, k)| if k > 0 { s / k as f64 } else { f64::NAN })
+        .collect();
+    let trials: Vec<f64> = (0..n)
+        .map(|c| {
+            acc.survival
+                .observations(c..c + 1)
+                .iter()
+                .map(|o| o.total)
+                .sum()
+        })
+        .collect();
+    let ln_reference: Vec<f64> = classes
+        .iter()
+        .map(|cs| {
+            let (s, w) = cs
+                .clone()
+                .filter(|&c| trials[c] > 0.0 && ln_x[c].is_finite())
+                .fold((0.0, 0.0), |(s, w), c| {
+                    (s + trials[c] * ln_x[c], w + trials[c])
+                });
+            if w > 0.0 { s / w } else { f64::NAN }
+        })
+        .collect();
+    let mut delta = vec![f64::NAN; n];
+    for (b, cs) in classes.iter().enumerate() {
+        for c in cs.clone() {
+            delta[c] = ln_x[c] - ln_reference[b];
+        }
+    }
+    Some(ReflectivityDeltas {
+        delta,
+        ln_reference,
+        floor,
+    })
+}
+
 /// The law that bends ([`crate::bend`]): fits `a·MOR^c` beside the line,
 /// chooses on held-out recordings, writes the chosen law into the bands,
 /// and fills each band's per-MOR-bin 50 % ranges and the line's lack of
@@ -585,6 +656,14 @@ fn bend_and_check(
     acc: &WeatherAcc,
 ) -> Option<LawChoice> {
     let p = cx.params;
+    // The same offsets the recordings' classes were built with.
+    let classes: Vec<_> = p
+        .bands()
+        .iter()
+        .map(|b| cx.partition.classes_in(b))
+        .collect();
+    let deltas = reflectivity_deltas(acc, cx, &classes);
+    let deltas = deltas.as_ref();
     if bands.iter().all(|b| b.slope.is_none()) {
         return None;
     }
@@ -626,7 +705,7 @@ fn bend_and_check(
     let all_fitted = powers.iter().zip(&fitted).all(|(p, f)| !*f || p.is_some());
     let wins = all_fitted && matches!(&evidence, Ok(e) if e.gain > 0.0 && e.p <= alpha);
     let bent = wins && p.apply_bend();
-    let choice = LawChoice {
+    let mut choice = LawChoice {
         chosen: if bent { "power" } else { "linear" }.into(),
         exponents: powers
             .iter()
@@ -671,7 +750,87 @@ fn bend_and_check(
             ),
             _ => None,
         },
+        reflectivity: None,
     };
+    // The reflectivity term beside the law the comparison above prefers
+    // (the power law when it wins, whether or not it is applied).
+    let refl: Option<Vec<Option<crate::bend::ReflectivityFit>>> = deltas.map(|d| {
+        let fits = fit_reflectivities(&all, &fitted, wins, opts, bin);
+        let ev = compare_reflectivity(
+            recs,
+            &fitted,
+            wins,
+            opts,
+            bin,
+            folds as usize,
+            seed("reflectivity-choice", ""),
+        );
+        let all_fitted = fits.iter().zip(&fitted).all(|(f, x)| !*x || f.is_some());
+        let refl_wins = all_fitted && matches!(&ev, Ok(e) if e.gain > 0.0 && e.p <= alpha);
+        let applied = refl_wins && p.apply_bend();
+        choice.reflectivity = Some(ReflectivityChoice {
+            chosen: applied,
+            exponents: fits
+                .iter()
+                .map(|f| f.as_ref().map(|f| f.reflectivity_exponent))
+                .collect(),
+            exponent_ci95: match &ev {
+                Ok(e) => fits
+                    .iter()
+                    .enumerate()
+                    .map(|(b, f)| {
+                        let f = f.as_ref()?;
+                        let leave_out: Vec<Option<f64>> =
+                            e.fold_exponents.iter().map(|fe| fe[b]).collect();
+                        let [low, high] = crate::bend::reflectivity_jackknife_interval(
+                            f.reflectivity_exponent,
+                            &leave_out,
+                        )
+                        .ok()?;
+                        Some(Interval {
+                            low,
+                            high,
+                            level: 0.95,
+                            method: format!(
+                                "grouped jackknife over {} folds of recordings (Student t on {} df)",
+                                leave_out.len(),
+                                leave_out.len() - 1
+                            ),
+                        })
+                    })
+                    .collect(),
+                Err(_) => vec![None; fits.len()],
+            },
+            references: d
+                .ln_reference
+                .iter()
+                .zip(&fits)
+                .map(|(l, f)| f.as_ref().and(l.is_finite().then(|| l.exp())))
+                .collect(),
+            floor: d.floor,
+            gain_nats_per_recording: ev.as_ref().map_or(0.0, |e| e.gain),
+            recordings_better: ev.as_ref().map_or(0, |e| e.better as u32),
+            recordings: ev.as_ref().map_or(0, |e| e.recordings as u32),
+            p_value: ev.as_ref().map_or(1.0, |e| e.p),
+            reason: match (all_fitted, &ev) {
+                (false, _) => Some(
+                    "the reflectivity term could not be fitted in every band (a band's trials in one class, or no slope)"
+                        .into(),
+                ),
+                (_, Err(e)) => Some(e.clone()),
+                _ if refl_wins && !applied => Some(
+                    "the reflectivity term predicts held-out recordings better, but it is not applied: apply_bend is off (murk fit --bend)"
+                        .into(),
+                ),
+                _ => None,
+            },
+        });
+        if applied {
+            fits
+        } else {
+            vec![None; fitted.len()]
+        }
+    });
     let rs = cx.range_scale;
     let z_line = half_z(opts.edge, line.dropout, line.residual);
     let w = p.mor_bin_width_m();
@@ -684,7 +843,34 @@ fn bend_and_check(
             let z = half_z(opts.edge, f.fit.dropout, f.fit.residual)?;
             Some((a, f.exponent, f.fit.bands[i].width?, z))
         });
-        band.law = power_band.map(|(a, b, _, _)| murk_types::VanishingLaw::Power { a, b });
+        band.law = power_band.map(|(a, b, _, _)| murk_types::VanishingLaw::Power {
+            a,
+            b,
+            reflectivity: None,
+        });
+        // An applied reflectivity term replaces the law: its own exponent
+        // of MOR (1 when the line was kept), coefficient and edge width.
+        let refl_band = refl
+            .as_ref()
+            .and_then(|f| f[i].as_ref())
+            .zip(deltas)
+            .and_then(|(f, d)| {
+                let a = *f.fit.bands[i].slope.as_ref().ok()?;
+                let ln_ref = d.ln_reference[i];
+                ln_ref.is_finite().then_some((f, a, ln_ref.exp(), d.floor))
+            });
+        if let Some((f, a, reference, floor)) = refl_band {
+            band.law = Some(murk_types::VanishingLaw::Power {
+                a,
+                b: f.exponent,
+                reflectivity: Some(murk_types::ReflectivityDependence {
+                    exponent: f.reflectivity_exponent,
+                    reference,
+                    floor,
+                    edge_width: f.fit.bands[i].width,
+                }),
+            });
+        }
         let line_half = |mor: f64| {
             let (s, wd) = (band.slope?, band.edge_width?);
             Some(s * mor * rs * (1.0 + wd * z_line?))
@@ -709,7 +895,17 @@ fn bend_and_check(
             if h.trials == 0 {
                 continue;
             }
-            let (lm, am) = (line_half(mean), law_half(mean));
+            let lm = line_half(mean);
+            let am = match refl_band {
+                // Each return its own distance: the law's crossing over
+                // the bin's own returns, pooled by range as the data's.
+                Some((f, ..)) => crate::bend::predicted_half_crossing(&in_bin, i, |r, delta, u| {
+                    let shift = (1.0 - f.exponent) * r.mor.ln() - f.reflectivity_exponent * delta;
+                    f.fit.keep_probability(opts, i, (u.ln() + shift).exp())
+                })
+                .ok(),
+                None => law_half(mean),
+            };
             if let (Ok(r), Ok(ci), Some(l)) = (&h.range, &h.ci95, lm) {
                 tested.push((*r, *ci, l));
             }
@@ -781,6 +977,9 @@ pub fn weather(
     // Each recording's share of the likelihood: intervals over recordings
     // and the held-out test of the edge against range alone.
     let classes: Vec<_> = bands.iter().map(|b| cx.partition.classes_in(b)).collect();
+    // The reflectivity classes' offsets from their band's reference, when a
+    // reflectivity term is fitted.
+    let deltas = reflectivity_deltas(acc, cx, &classes);
     let per_recording: Vec<RecordingTrials> = acc
         .rows
         .iter()
@@ -798,6 +997,22 @@ pub fn weather(
                 .collect(),
             ln_mor_scaled: r.ln_mor_scaled,
             mor: r.mor,
+            classes: match &deltas {
+                None => Vec::new(),
+                Some(d) => classes
+                    .iter()
+                    .enumerate()
+                    .map(|(b, cs)| {
+                        cs.clone()
+                            .filter_map(|c| {
+                                let o = acc.survival.cell_observations(&r.survival, c..c + 1);
+                                (!o.is_empty()).then(|| (d.delta[c], o))
+                            })
+                            .filter(|(delta, _)| delta.is_finite() && b < d.ln_reference.len())
+                            .collect()
+                    })
+                    .collect(),
+            },
         })
         .collect();
     let (robust, evidence) = match &ml {

@@ -55,46 +55,90 @@ pub fn shifted_observations(
     step: f64,
     anchor: f64,
 ) -> Vec<Vec<Obs>> {
+    (0..n_bands)
+        .map(|b| {
+            linear_binned(
+                recs.iter()
+                    .map(|r| ((1.0 - c) * r.mor.ln(), r.bands[b].as_slice())),
+                step,
+                anchor,
+            )
+        })
+        .collect()
+}
+
+/// [`shifted_observations`] with a reflectivity term: each class of a
+/// band's trials ([`RecordingTrials::classes`]) also moves by `−k·δ`, `δ`
+/// its `ln x` less the band's reference, so a fit on them places the edge
+/// at `a·MOR^c·(x/x_ref)^k`. `k = 0` is [`shifted_observations`] exactly.
+pub fn shifted_class_observations(
+    recs: &[&RecordingTrials],
+    n_bands: usize,
+    c: f64,
+    k: f64,
+    step: f64,
+    anchor: f64,
+) -> Vec<Vec<Obs>> {
+    if k == 0.0 {
+        return shifted_observations(recs, n_bands, c, step, anchor);
+    }
+    (0..n_bands)
+        .map(|b| {
+            linear_binned(
+                recs.iter().flat_map(|r| {
+                    let shift = (1.0 - c) * r.mor.ln();
+                    r.classes
+                        .get(b)
+                        .into_iter()
+                        .flatten()
+                        .map(move |(delta, obs)| (shift - k * delta, obs.as_slice()))
+                }),
+                step,
+                anchor,
+            )
+        })
+        .collect()
+}
+
+/// Observations moved by their shift in `ln u`, linear-binned at `step`.
+fn linear_binned<'a>(
+    items: impl Iterator<Item = (f64, &'a [Obs])>,
+    step: f64,
+    anchor: f64,
+) -> Vec<Obs> {
     // Positions this close to a bin centre (in bins) are on it: `c = 1`
     // gives the observations back exactly, not with a 1e-12 share moved.
     const ON_CENTRE: f64 = 1e-9;
-    let mut out = Vec::with_capacity(n_bands);
-    for b in 0..n_bands {
-        let mut m: std::collections::BTreeMap<i64, (f64, f64)> = Default::default();
-        for r in recs {
-            let shift = (1.0 - c) * r.mor.ln();
-            for o in &r.bands[b] {
-                // Position in bin centres: bin k's centre is at k.
-                let x = (o.u.ln() + shift - anchor) / step - 0.5;
-                let nearest = x.round();
-                let (k, w) = if (x - nearest).abs() < ON_CENTRE {
-                    (nearest as i64, 0.0)
-                } else {
-                    let k = x.floor();
-                    (k as i64, x - k)
-                };
-                let e = m.entry(k).or_default();
-                e.0 += (1.0 - w) * o.kept;
-                e.1 += (1.0 - w) * o.total;
-                if w > 0.0 {
-                    let e = m.entry(k + 1).or_default();
-                    e.0 += w * o.kept;
-                    e.1 += w * o.total;
-                }
+    let mut m: std::collections::BTreeMap<i64, (f64, f64)> = Default::default();
+    for (shift, obs) in items {
+        for o in obs {
+            // Position in bin centres: bin k's centre is at k.
+            let x = (o.u.ln() + shift - anchor) / step - 0.5;
+            let nearest = x.round();
+            let (k, w) = if (x - nearest).abs() < ON_CENTRE {
+                (nearest as i64, 0.0)
+            } else {
+                let k = x.floor();
+                (k as i64, x - k)
+            };
+            let e = m.entry(k).or_default();
+            e.0 += (1.0 - w) * o.kept;
+            e.1 += (1.0 - w) * o.total;
+            if w > 0.0 {
+                let e = m.entry(k + 1).or_default();
+                e.0 += w * o.kept;
+                e.1 += w * o.total;
             }
         }
-        out.push(
-            m.into_iter()
-                .filter(|(_, (_, n))| *n > 0.0)
-                .map(|(k, (kept, total))| Obs {
-                    u: (anchor + (k as f64 + 0.5) * step).exp(),
-                    kept,
-                    total,
-                })
-                .collect(),
-        );
     }
-    out
+    m.into_iter()
+        .filter(|(_, (_, n))| *n > 0.0)
+        .map(|(k, (kept, total))| Obs {
+            u: (anchor + (k as f64 + 0.5) * step).exp(),
+            kept,
+            total,
+        })
+        .collect()
 }
 
 /// A power-law fit: the exponent and the survival fit at it (whose band
@@ -126,7 +170,21 @@ pub fn fit_band_at(
     opts: &SurvivalOptions,
     bin: Binning,
 ) -> Option<SurvivalResult> {
-    let mut obs = shifted_observations(recs, n_bands, c, bin.step, bin.anchor);
+    fit_band_at_k(recs, n_bands, band, c, 0.0, opts, bin)
+}
+
+/// [`fit_band_at`] with the reflectivity exponent `k` too
+/// ([`shifted_class_observations`]).
+pub fn fit_band_at_k(
+    recs: &[&RecordingTrials],
+    n_bands: usize,
+    band: usize,
+    c: f64,
+    k: f64,
+    opts: &SurvivalOptions,
+    bin: Binning,
+) -> Option<SurvivalResult> {
+    let mut obs = shifted_class_observations(recs, n_bands, c, k, bin.step, bin.anchor);
     for (j, o) in obs.iter_mut().enumerate() {
         if j != band {
             o.clear();
@@ -304,6 +362,259 @@ pub fn compare_laws(
     })
 }
 
+/// Range of the reflectivity exponent searched (the lidar equation in fog
+/// gives about 0.1–0.25: see [`ReflectivityFit`]).
+const REFLECTIVITY_EXPONENT_RANGE: (f64, f64) = (-1.0, 1.5);
+
+/// A band's law with a reflectivity term: `a·MOR^c·(x/x_ref)^k`.
+///
+/// Why a power of reflectivity: in fog the hard echo of a return of
+/// reflectivity `x` at range `R` is `∝ x·exp(−2αR)/R²` and it is lost where
+/// it falls below the fog's own echo, so its 50 %-survival range solves
+/// `ln x = 2αR + 2 ln R + const`: `d ln R / d ln x = 1/(2αR + 2)`, about
+/// 0.13–0.2 at the ranges where returns vanish (`α = ln 20/MOR`,
+/// `R ≈ 0.5–0.9·MOR`), nearly constant, so a power of `x` with one exponent
+/// per band follows it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReflectivityFit {
+    /// The exponent `c` of MOR (1 when the line was kept).
+    pub exponent: f64,
+    /// The exponent `k` of reflectivity.
+    pub reflectivity_exponent: f64,
+    /// The survival fit on the shifted trials (its band slope is `a`).
+    pub fit: SurvivalResult,
+}
+
+/// Fits band `band`'s law with a reflectivity term on `recs`: profile
+/// likelihood over `k` (and over `c`, by turns, when `bend`; else `c = 1`),
+/// each a Brent search. `None` when the band has no class spread (every
+/// trial in one class) or no slope.
+pub fn fit_reflectivity(
+    recs: &[&RecordingTrials],
+    n_bands: usize,
+    band: usize,
+    bend: bool,
+    opts: &SurvivalOptions,
+    bin: Binning,
+) -> Option<ReflectivityFit> {
+    let spread = recs
+        .iter()
+        .flat_map(|r| r.classes.get(band).into_iter().flatten())
+        .filter(|(_, o)| !o.is_empty())
+        .map(|(d, _)| *d)
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), d| {
+            (a.min(d), b.max(d))
+        });
+    if !(spread.1 - spread.0 > 0.0) {
+        return None;
+    }
+    let eval = |c: f64, k: f64| fit_band_at_k(recs, n_bands, band, c, k, opts, bin);
+    let cost = |c: f64, k: f64| eval(c, k).map_or(f64::INFINITY, |r| r.nll);
+    let (klo, khi) = REFLECTIVITY_EXPONENT_RANGE;
+    let (clo, chi) = EXPONENT_RANGE;
+    let mut c = 1.0;
+    let mut k = crate::stats::optim::minimize_scalar(&|k| cost(c, k), klo, khi, EXPONENT_TOL)?;
+    if bend {
+        // By turns: c at k, then k at c, twice (the two move together
+        // little: c places the edge along MOR, k across the band).
+        for _ in 0..2 {
+            c = crate::stats::optim::minimize_scalar(&|c| cost(c, k), clo, chi, EXPONENT_TOL)?;
+            k = crate::stats::optim::minimize_scalar(&|k| cost(c, k), klo, khi, EXPONENT_TOL)?;
+        }
+    }
+    let fit = eval(c, k)?;
+    fit.nll.is_finite().then_some(ReflectivityFit {
+        exponent: c,
+        reflectivity_exponent: k,
+        fit,
+    })
+}
+
+/// [`fit_reflectivity`] of every band with a slope (`fitted[i]`), bands in
+/// parallel.
+pub fn fit_reflectivities(
+    recs: &[&RecordingTrials],
+    fitted: &[bool],
+    bend: bool,
+    opts: &SurvivalOptions,
+    bin: Binning,
+) -> Vec<Option<ReflectivityFit>> {
+    (0..fitted.len())
+        .into_par_iter()
+        .map(|i| {
+            fitted[i]
+                .then(|| fit_reflectivity(recs, fitted.len(), i, bend, opts, bin))
+                .flatten()
+        })
+        .collect()
+}
+
+/// Log-likelihood of `obs` moved by `shift` in `ln u` under band `b` of
+/// `fit`; `None` when the fit has no slope there.
+fn log_likelihood(
+    fit: &SurvivalResult,
+    opts: &SurvivalOptions,
+    b: usize,
+    obs: &[Obs],
+    shift: f64,
+) -> Option<f64> {
+    let lp = |p: f64| p.clamp(1e-12, 1.0 - 1e-12);
+    let mut l = 0.0;
+    for o in obs {
+        let p = lp(fit.keep_probability(opts, b, (o.u.ln() + shift).exp())?);
+        l += o.kept * p.ln() + (o.total - o.kept) * (1.0 - p).ln();
+    }
+    Some(l)
+}
+
+/// The held-out comparison of the reflectivity term with the law without
+/// it: the line (`bend` false) or the power law (`bend` true), each fitted
+/// per band with the same freedom, both fitted without the fold, as
+/// [`compare_laws`]. `fold_exponents` holds the folds' `k`.
+pub fn compare_reflectivity(
+    recs: &[RecordingTrials],
+    fitted: &[bool],
+    bend: bool,
+    opts: &SurvivalOptions,
+    bin: Binning,
+    folds: usize,
+    seed: [u8; 32],
+) -> Result<LawEvidence, String> {
+    let n_bands = fitted.len();
+    let g_n = recs.len();
+    if g_n < folds.max(3) {
+        return Err(format!(
+            "too few recordings ({g_n}) to compare the laws on held-out recordings"
+        ));
+    }
+    let mors: Vec<f64> = recs.iter().map(|r| r.mor).collect();
+    let fold_of = crate::stats::interleaved_folds(&mors, folds);
+    type Fold = Result<(Vec<Option<f64>>, Vec<f64>), String>;
+    let per_fold: Vec<Fold> = (0..folds)
+        .into_par_iter()
+        .map(|f| {
+            let train: Vec<&RecordingTrials> = (0..g_n)
+                .filter(|&g| fold_of[g] != f)
+                .map(|g| &recs[g])
+                .collect();
+            // The law without the term: (exponent, fit) per band.
+            let base: Vec<Option<(f64, SurvivalResult)>> = (0..n_bands)
+                .map(|b| {
+                    if !fitted[b] {
+                        None
+                    } else if bend {
+                        fit_power(&train, n_bands, b, opts, bin).map(|p| (p.exponent, p.fit))
+                    } else {
+                        fit_band_at(&train, n_bands, b, 1.0, opts, bin).map(|r| (1.0, r))
+                    }
+                })
+                .collect();
+            let alt = fit_reflectivities(&train, fitted, bend, opts, bin);
+            if alt.iter().zip(fitted).any(|(p, f)| *f && p.is_none()) {
+                return Err(
+                    "the reflectivity term could not be fitted with a fold of recordings left out"
+                        .into(),
+                );
+            }
+            let exponents = alt
+                .iter()
+                .map(|p| p.as_ref().map(|p| p.reflectivity_exponent))
+                .collect();
+            let mut gains = Vec::new();
+            for g in (0..g_n).filter(|&g| fold_of[g] == f) {
+                let r = &recs[g];
+                let mut d = 0.0;
+                let mut any = false;
+                for (b, alt) in alt.iter().enumerate() {
+                    let (Some(alt), Some((c0, base))) = (alt, &base[b]) else {
+                        continue;
+                    };
+                    let l0 = log_likelihood(base, opts, b, &r.bands[b], (1.0 - c0) * r.mor.ln());
+                    let shift = (1.0 - alt.exponent) * r.mor.ln();
+                    let l1: Option<f64> = r
+                        .classes
+                        .get(b)
+                        .into_iter()
+                        .flatten()
+                        .map(|(delta, obs)| {
+                            log_likelihood(
+                                &alt.fit,
+                                opts,
+                                b,
+                                obs,
+                                shift - alt.reflectivity_exponent * delta,
+                            )
+                        })
+                        .sum();
+                    if let (Some(l0), Some(l1)) = (l0, l1) {
+                        any = true;
+                        d += l1 - l0;
+                    }
+                }
+                if any {
+                    gains.push(d);
+                }
+            }
+            Ok((exponents, gains))
+        })
+        .collect();
+    let mut gains = Vec::new();
+    let mut fold_exponents = Vec::with_capacity(folds);
+    for f in per_fold {
+        let (exponents, g) = f?;
+        fold_exponents.push(exponents);
+        gains.extend(g);
+    }
+    let n = gains.len();
+    if n < 3 {
+        return Err(format!(
+            "too few recordings with fitted bands ({n}) to compare the laws"
+        ));
+    }
+    Ok(LawEvidence {
+        gain: gains.iter().sum::<f64>() / n as f64,
+        p: sign_flip_p(&gains, seed),
+        recordings: n,
+        better: gains.iter().filter(|x| **x > 0.0).count(),
+        fold_exponents,
+    })
+}
+
+/// The grouped-jackknife 95 % interval of the reflectivity exponent `k`
+/// (as [`jackknife_interval`], over [`REFLECTIVITY_EXPONENT_RANGE`]).
+pub fn reflectivity_jackknife_interval(
+    estimate: f64,
+    leave_out: &[Option<f64>],
+) -> Result<[f64; 2], String> {
+    jackknife_in(estimate, leave_out, REFLECTIVITY_EXPONENT_RANGE)
+}
+
+/// The 50 % crossing of a fitted law's survival over the clear returns of
+/// band `band` in `recs` (one MOR bin), pooled by range as
+/// [`half_survival`] pools the data: what the law predicts for that
+/// number. `keep(r, delta, u)` is the law's keep probability of a trial at
+/// `u` of a class `delta` from the band's reference in recording `r`.
+pub fn predicted_half_crossing(
+    recs: &[&RecordingTrials],
+    band: usize,
+    keep: impl Fn(&RecordingTrials, f64, f64) -> Option<f64>,
+) -> Result<f64, String> {
+    let mut m: std::collections::BTreeMap<i64, (f64, f64)> = Default::default();
+    for r in recs {
+        for (delta, obs) in r.classes.get(band).into_iter().flatten() {
+            for o in obs {
+                let p = keep(r, *delta, o.u).ok_or("the law has no slope in this band")?;
+                let k = ((o.u.ln() + r.ln_mor_scaled) / RANGE_STEP).floor() as i64;
+                let e = m.entry(k).or_default();
+                e.0 += p * o.total;
+                e.1 += o.total;
+            }
+        }
+    }
+    let rows: Vec<(i64, f64, f64)> = m.into_iter().map(|(k, (a, b))| (k, a, b)).collect();
+    half_crossing(&rows)
+}
+
 /// The grouped-jackknife 95 % interval of an exponent from its fits with
 /// each of `k` folds of recordings left out (`k ≥ 3`): centre `estimate`,
 /// variance `(k − 1)/k · Σ (θ₋f − θ̄)²`, Student's t on `k − 1` degrees of
@@ -313,6 +624,14 @@ pub fn compare_laws(
 /// search's precision of the searched range's ends (the profile did not
 /// find an interior optimum, so its spread says nothing).
 pub fn jackknife_interval(estimate: f64, leave_out: &[Option<f64>]) -> Result<[f64; 2], String> {
+    jackknife_in(estimate, leave_out, EXPONENT_RANGE)
+}
+
+fn jackknife_in(
+    estimate: f64,
+    leave_out: &[Option<f64>],
+    (lo, hi): (f64, f64),
+) -> Result<[f64; 2], String> {
     let k = leave_out.len();
     if k < 3 {
         return Err(format!("{k} folds are too few for a jackknife interval"));
@@ -320,7 +639,6 @@ pub fn jackknife_interval(estimate: f64, leave_out: &[Option<f64>]) -> Result<[f
     let Some(th): Option<Vec<f64>> = leave_out.iter().copied().collect() else {
         return Err("the exponent could not be fitted with a fold left out".into());
     };
-    let (lo, hi) = EXPONENT_RANGE;
     let edge = |c: f64| c <= lo + 2.0 * EXPONENT_TOL || c >= hi - 2.0 * EXPONENT_TOL;
     if edge(estimate) || th.iter().any(|&c| edge(c)) {
         return Err(format!(
@@ -595,6 +913,7 @@ mod tests {
                     bands,
                     ln_mor_scaled: f64::ln(mor),
                     mor,
+                    classes: Vec::new(),
                 }
             })
             .collect()

@@ -79,6 +79,7 @@ fn yes() -> bool {
 /// | `require_edge` | true | report a slope only where the held-out edge test sees an edge, null with the test's reason otherwise (false: the slope is kept and the verdict goes in the band's `reason` as a warning). The test's null is "the weather does nothing": each return's clear survival, measured on the clear recordings, times one rate (see `EdgeTest` in murk-types) | |
 /// | `apply_bend` | false | write the bending law `a·MOR^b` into a band (`law`, used by `murk apply` and `murk diagnose`) when it predicts held-out recordings better than the line (`law_choice` records the comparison either way). Off by default: on a generated campaign whose survival depends on the beam's elevation (linear truth in r/MOR), the pooled data bend (exponents 1.14 and 1.4, held-out p 1e-5), and `murk diagnose` then reports survival × MOR falsely; a bend chosen from pooled recordings cannot tell a law that bends from a covariate left out | |
 /// | `compare_laws` | true | compare the bending law with the line on held-out recordings in every band with a slope (the band's `law_choice`: exponents, their intervals, the held-out gain); false skips it — about 370 survival fits per weather, most of a fit's time — and `law_choice` says it was not compared. `murk diagnose` turns it off for its per-fold baselines, which only need the applied law. Must be true with `apply_bend` | |
+/// | `reflectivity_law_edges` | [] (off) | reflectivity classes inside the bands for a reflectivity term in the vanishing law, `D·(max(x, x₀)/x_ref)^k` per band (`x₀` the first edge), fitted beside the chosen law and compared with it on held-out recordings (`law_choice.reflectivity`); written into the bands' `law` when it wins and `apply_bend` is on. The lidar equation in fog gives each return its own distance by its reflectivity, so a band spanning a 25-fold range of reflectivity has no one distance. [`DEFAULT_REFLECTIVITY_LAW_EDGES`] is a grid of ratio 1.5 (`murk fit --reflectivity-law`). Empty: off, the survival histograms keep the bands' classes | finite, > 0, strictly increasing; needs `compare_laws` |
 /// | `edge_test_alpha` | 0.01 | level of the one-sided sign-flip test of the held-out gains over recordings (an edge needs at least ⌈log₂(1/α)⌉ recordings: 7 at 1 %) | (0, 0.5] |
 /// | `survival_log_step` | 0.01 | bin width of ln(r / MOR) in the survival histogram (1 % in range: far finer than any edge or slope the data resolve) | (0, 0.1] |
 /// | `reflectivity_floor` | 0 | lower truncation of the ghost/ring reflectivity laws | finite |
@@ -89,6 +90,14 @@ fn yes() -> bool {
 /// | `radar_min_presence` | 0.5 | share of clear radar recordings a detection must recur in to enter the radar reference | (0, 1] |
 #[derive(Debug, Clone, PartialEq)]
 pub struct FitParams(FitValidParams);
+
+/// The reflectivity classes [`FitParams::reflectivity_law`] turns on:
+/// calibrated reflectivity from 1 to about 200 at a ratio of 1.5 (a class
+/// spans 0.41 in `ln x`, so at an exponent `k` of 0.2 a return's distance
+/// is placed within 4 % of its own by its class's mean).
+pub const DEFAULT_REFLECTIVITY_LAW_EDGES: [f64; 14] = [
+    1.0, 1.5, 2.25, 3.375, 5.0625, 7.59, 11.39, 17.09, 25.63, 38.44, 57.67, 86.5, 129.7, 194.6,
+];
 
 /// Checked hyperparameters (see [`FitParams`] for the table).
 #[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
@@ -121,6 +130,9 @@ pub struct FitValidParams {
     // encoding, which cannot skip a field.)
     #[serde(default = "yes")]
     pub(crate) compare_laws: bool,
+    // Left out of `to_json` when empty (the default), as `compare_laws`.
+    #[serde(default)]
+    pub(crate) reflectivity_law_edges: Vec<f64>,
     pub(crate) edge_test_alpha: f64,
     pub(crate) survival_log_step: f64,
     pub(crate) reflectivity_floor: f64,
@@ -156,6 +168,7 @@ impl Default for FitParams {
             require_edge: true,
             apply_bend: false,
             compare_laws: true,
+            reflectivity_law_edges: Vec::new(),
             edge_test_alpha: 0.01,
             survival_log_step: 0.01,
             reflectivity_floor: 0.0,
@@ -228,6 +241,19 @@ impl FitParams {
         apply_bend: bool);
     setter!(/// Sets `compare_laws`.
         compare_laws: bool);
+    setter!(/// Sets `reflectivity_law_edges` (empty: no reflectivity term).
+        reflectivity_law_edges: Vec<f64>);
+
+    /// Turns the reflectivity term on with [`DEFAULT_REFLECTIVITY_LAW_EDGES`]
+    /// (`true`) or off (`false`).
+    pub fn reflectivity_law(self, on: bool) -> Self {
+        self.reflectivity_law_edges(if on {
+            DEFAULT_REFLECTIVITY_LAW_EDGES.to_vec()
+        } else {
+            Vec::new()
+        })
+    }
+
     setter!(/// Sets `edge_test_alpha`.
         edge_test_alpha: f64);
     setter!(/// Sets `survival_log_step`.
@@ -362,6 +388,24 @@ impl FitParams {
                 "false".into(),
                 "apply_bend needs the held-out comparison that chooses the law",
             );
+        }
+        if !p.reflectivity_law_edges.is_empty() {
+            let e = &p.reflectivity_law_edges;
+            if e.iter().any(|x| !(x.is_finite() && *x > 0.0)) || e.windows(2).any(|w| w[1] <= w[0])
+            {
+                return bad(
+                    "reflectivity_law_edges",
+                    format!("{e:?}"),
+                    "must be finite, > 0 and strictly increasing",
+                );
+            }
+            if !p.compare_laws {
+                return bad(
+                    "compare_laws",
+                    "false".into(),
+                    "a reflectivity term (reflectivity_law_edges) is chosen by the held-out comparison",
+                );
+            }
         }
         if !(p.edge_test_alpha > 0.0 && p.edge_test_alpha <= 0.5) {
             return bad(
@@ -500,6 +544,11 @@ impl FitValidParams {
         self.compare_laws
     }
 
+    /// `reflectivity_law_edges` (empty: no reflectivity term).
+    pub fn reflectivity_law_edges(&self) -> &[f64] {
+        &self.reflectivity_law_edges
+    }
+
     /// `edge_test_alpha`.
     pub fn edge_test_alpha(&self) -> f64 {
         self.edge_test_alpha
@@ -534,13 +583,17 @@ impl FitValidParams {
         self.radar_min_presence
     }
     /// Every parameter as JSON (for provenance), `compare_laws` only when off
-    /// (so tables written before it existed read and hash the same).
+    /// and `reflectivity_law_edges` only when set (so tables written before
+    /// they existed read and hash the same).
     pub fn to_json(&self) -> serde_json::Value {
         let mut v = serde_json::to_value(self).unwrap_or(serde_json::Value::Null);
-        if self.compare_laws
-            && let Some(o) = v.as_object_mut()
-        {
-            o.remove("compare_laws");
+        if let Some(o) = v.as_object_mut() {
+            if self.compare_laws {
+                o.remove("compare_laws");
+            }
+            if self.reflectivity_law_edges.is_empty() {
+                o.remove("reflectivity_law_edges");
+            }
         }
         v
     }

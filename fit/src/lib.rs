@@ -158,7 +158,9 @@ pub use diagnostics::{
 };
 pub use driver::{FitInputs, RecordingInput};
 pub use error::FitError;
-pub use hyperparams::{Band, EdgeShape, FitParams, FitValidParams, parse_edge};
+pub use hyperparams::{
+    Band, DEFAULT_REFLECTIVITY_LAW_EDGES, EdgeShape, FitParams, FitValidParams, parse_edge,
+};
 pub use state::{ClearPart, FitState, STATE_FORMAT, Selection};
 /// The one-dimensional bounded minimiser (Brent's method) that profiles the
 /// bending law's exponent, shared with the diagnosis's extension terms.

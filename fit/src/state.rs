@@ -87,8 +87,9 @@ use crate::{FitError, FitParams, FitValidParams, FittedTable, TOOL};
 
 /// Version of the state file layout; a state of another format is refused.
 /// Format 2: the parameters gained `compare_laws`; format 3:
-/// `reference_min_agreement` and the recordings' MOR readings.
-pub const STATE_FORMAT: u32 = 3;
+/// `reference_min_agreement` and the recordings' MOR readings; format 4:
+/// `reflectivity_law_edges`.
+pub const STATE_FORMAT: u32 = 4;
 
 const MAGIC: &[u8; 8] = b"MURKFITS";
 
@@ -465,12 +466,14 @@ fn params_sha256(params: &FitValidParams) -> String {
 }
 
 /// The digest of the parameters a clear part depends on: all of them but
-/// `compare_laws` and `apply_bend`, which only the finish reads
-/// ([`ClearPart::serves`]).
+/// `compare_laws` and `apply_bend`, which only the finish reads, and
+/// `reflectivity_law_edges`, which only the degraded recordings' histograms
+/// read ([`ClearPart::serves`]).
 fn clear_params_sha256(params: &FitValidParams) -> String {
     let mut p = params.clone();
     p.compare_laws = true;
     p.apply_bend = false;
+    p.reflectivity_law_edges = Vec::new();
     params_sha256(&p)
 }
 
@@ -555,7 +558,8 @@ pub(crate) fn partition(params: &FitValidParams) -> Partition {
             .bands()
             .iter()
             .chain(params.sweep_bands().iter())
-            .map(|b| b.min),
+            .map(|b| b.min)
+            .chain(params.reflectivity_law_edges().iter().copied()),
     )
 }
 

@@ -867,6 +867,11 @@ pub struct RecordingTrials {
     pub ln_mor_scaled: f64,
     /// Its MOR (orders the folds).
     pub mor: f64,
+    /// Per band, the observations of each reflectivity class in it with
+    /// the class's `ln x` less the band's reference (the law's
+    /// reflectivity term, [`crate::bend::fit_reflectivity`]); empty when
+    /// no reflectivity term is fitted.
+    pub classes: Vec<Vec<(f64, Vec<Obs>)>>,
 }
 
 /// Tests, per band, the edge model against the no-weather model by
@@ -1261,6 +1266,7 @@ mod tests {
                 clear: vec![vec![1.0; cells.len()]],
                 ln_mor_scaled: read.ln(),
                 mor: read,
+                classes: Vec::new(),
             });
             shares.push(cells);
         }
@@ -1320,6 +1326,7 @@ mod tests {
                 clear: vec![pooled.cell_clear_rates(&cells, &expected, 0..1)],
                 ln_mor_scaled: read.ln(),
                 mor: read,
+                classes: Vec::new(),
             });
             shares.push(cells);
         }

@@ -578,3 +578,223 @@ fn without_the_law_comparison_the_table_differs_only_in_law_choice() {
         .to_string();
     assert!(refused.contains("compare_laws"), "{refused}");
 }
+
+fn fit_reflectivity(path: &Path, replicates: u32, mor_bin_m: f64) -> FittedTable {
+    let campaign = Campaign::open(path).unwrap();
+    FitParams::default()
+        .bootstrap_replicates(replicates)
+        .mor_bin_width_m(mor_bin_m)
+        .apply_bend(true)
+        .reflectivity_law(true)
+        .check()
+        .unwrap()
+        .fit(&campaign)
+        .unwrap()
+}
+
+/// The seed's two bands with a reflectivity term inside each
+/// (`reflectivity_law`): on the physics fog the term must be chosen on
+/// held-out recordings in every seed, its exponent `k` must match the
+/// lidar equation's own `d ln R₅₀ / d ln x` (computed from the simulator
+/// at the band's reference reflectivity over the MORs the bins cover), and
+/// the law's 50 %-survival range must meet the simulator's truth:
+///
+/// - per reflectivity: at the 10th, 50th and 90th percentiles of the
+///   band's returns, in every covered MOR bin, the law's distance against
+///   the simulator's 50 % range of a return of that reflectivity (the
+///   truth with nothing of the scene in it);
+/// - per bin: `law_m` (the law's crossing pooled over the bin's own
+///   returns) against the scene's crossing.
+///
+/// Measured (seeds 1–3): `k` 0.172–0.175 in `[0, 10)` and 0.122–0.127 in
+/// `[10, ∞)` against the simulator's 0.13–0.19 and 0.11–0.14 over the
+/// bins' MORs; per reflectivity 144 of 156 within 5 %, worst 8.1 %. Per bin 42 of 52
+/// within 5 % of the scene's crossing (the law without the term: 35 of
+/// 52 against its band's reflectivities, see the test above), worst
+/// 13.6 %: the misses are bins of one to four recordings where the data
+/// themselves sit 8–16 % off the scene's crossing (the truth is computed
+/// on all ten clear revolutions, the fit's trials on the reference cells),
+/// and the law follows the data there.
+#[test]
+fn physics_fog_with_a_reflectivity_term_meets_the_truth_of_each_reflectivity() {
+    let Some(capture) = capture() else {
+        return;
+    };
+    let phys = PhysicsFog::default();
+    let scene = clear_scene(&capture, 10);
+    let (mut bins, mut within, mut worst) = (0usize, 0usize, 0f64);
+    let (mut points, mut points_within, mut points_worst) = (0usize, 0usize, 0f64);
+    let mut failures = Vec::new();
+    for seed in [1u64, 2, 3] {
+        let dir = tempfile::tempdir().unwrap();
+        semi_real::vlp16_campaign(&capture, dir.path(), &physics_cfg(), seed).unwrap();
+        let t = fit_reflectivity(dir.path(), 200, PHYSICS_MOR_BIN_M);
+        let fog = &t.table().weathers[&WeatherClass::Fog];
+        let choice = fog.law_choice.as_ref().expect("a law choice");
+        let refl = choice.reflectivity.as_ref().expect("the term was compared");
+        eprintln!(
+            "seed {seed}: {} k {:?} gain {:.1} nats/recording p {:.2e}",
+            choice.chosen, refl.exponents, refl.gain_nats_per_recording, refl.p_value
+        );
+        assert!(
+            refl.chosen && refl.p_value <= choice.alpha,
+            "seed {seed}: {refl:?}"
+        );
+        for b in &fog.vanishing_slope {
+            if b.slope.is_none() {
+                continue;
+            }
+            let law = b.law.expect("the term is applied");
+            let term = law.reflectivity().expect("with its reflectivity term");
+            let mut xs: Vec<f64> = scene
+                .iter()
+                .flat_map(|c| {
+                    (0..c.len())
+                        .map(move |i| c.intensity_scale.to_calibrated(c.intensity[i]) as f64)
+                })
+                .filter(|x| b.contains(*x))
+                .collect();
+            xs.sort_by(f64::total_cmp);
+            let pct = |q: f64| xs[((xs.len() - 1) as f64 * q).round() as usize];
+            let returns: Vec<(f64, f64)> = scene
+                .iter()
+                .flat_map(|c| {
+                    (0..c.len()).map(move |i| {
+                        let r = (c.x[i] as f64).hypot(c.y[i] as f64).hypot(c.z[i] as f64);
+                        (r, c.intensity_scale.to_calibrated(c.intensity[i]) as f64)
+                    })
+                })
+                .filter(|(_, x)| b.contains(*x))
+                .collect();
+            // The simulator's own exponent at the reference reflectivity.
+            let h = 1.5f64;
+            let k_truth = |mor: f64| {
+                let up = phys.half_survival_range_m(term.reference * h, mor)?;
+                let down = phys.half_survival_range_m(term.reference / h, mor)?;
+                Some((up / down).ln() / (2.0 * h.ln()))
+            };
+            let ks: Vec<f64> = b
+                .survival_bins
+                .iter()
+                .filter(|bin| bin.half_survival_range_m.is_some())
+                .filter_map(|bin| k_truth(bin.mor_m))
+                .collect();
+            let (klo, khi) = ks
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, c), k| {
+                    (a.min(*k), c.max(*k))
+                });
+            eprintln!(
+                "  band [{}, {:?}): k {:.3}, the simulator's {klo:.3}–{khi:.3}; law {}",
+                b.reflectivity_min,
+                b.reflectivity_max,
+                term.exponent,
+                law.describe()
+            );
+            assert!(
+                term.exponent > klo * 0.9 && term.exponent < khi * 1.1,
+                "seed {seed} band {}: k {} outside the simulator's {klo}–{khi}",
+                b.reflectivity_min,
+                term.exponent
+            );
+            for bin in &b.survival_bins {
+                if bin.half_survival_range_m.is_none() {
+                    continue;
+                }
+                for q in [0.1, 0.5, 0.9] {
+                    let x = pct(q);
+                    let truth = phys.half_survival_range_m(x, bin.mor_m).unwrap();
+                    let d = law.distance_m(bin.mor_m, 1.0) * law.reflectivity_factor(x);
+                    let err = d / truth - 1.0;
+                    points += 1;
+                    points_within += usize::from(err.abs() < 0.05);
+                    points_worst = points_worst.max(err.abs());
+                    if err.abs() >= 0.1 {
+                        failures.push(format!(
+                            "seed {seed} band {} MOR {:.1} x {x}: {:+.1} %",
+                            b.reflectivity_min,
+                            bin.mor_m,
+                            err * 100.0
+                        ));
+                    }
+                }
+                let truth = phys
+                    .scene_half_survival_range_m(&returns, bin.mor_m)
+                    .expect("truth crosses where the data do");
+                let law_m = bin.law_m.expect("the law's crossing");
+                let err = law_m / truth - 1.0;
+                bins += 1;
+                within += usize::from(err.abs() < 0.05);
+                worst = worst.max(err.abs());
+                if err.abs() >= 0.15 {
+                    failures.push(format!(
+                        "seed {seed} band {} MOR {:.1}: law_m {:+.1} %",
+                        b.reflectivity_min,
+                        bin.mor_m,
+                        err * 100.0
+                    ));
+                }
+            }
+        }
+    }
+    eprintln!(
+        "reflectivity term: per reflectivity {points_within} of {points} within 5 % (worst {:.1} %); per bin {within} of {bins} within 5 % of the scene (worst {:.1} %)",
+        points_worst * 100.0,
+        worst * 100.0
+    );
+    assert!(failures.is_empty(), "{failures:?}");
+    assert!(
+        points_within * 25 >= points * 22,
+        "{points_within} of {points} within 5 %"
+    );
+    assert!(within * 4 >= bins * 3, "{within} of {bins} bins within 5 %");
+}
+
+/// On murk's generator, whose truth has one distance per band, the
+/// reflectivity term is not chosen, and its exponent is near 0. Measured
+/// (seeds 2–4, 7 weathers): never chosen (p 0.075–0.98), `|k|` ≤ 0.035;
+/// the largest, 0.027–0.029 in rain's high band with intervals that
+/// exclude 0, may be the generator's rounding of reported reflectivity
+/// (a true 9.5–10 reads as the high band), not checked.
+#[test]
+fn a_reflectivity_term_is_not_chosen_where_the_truth_has_none() {
+    for seed in [2u64, 3, 4] {
+        let mut c = GeneratorConfig::preset(Preset::Small);
+        c.campaign.recordings = 60;
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("campaign");
+        Generator::new(c)
+            .unwrap()
+            .write_campaign(seed, &OutputOptions::new(&path))
+            .unwrap();
+        let t = fit_reflectivity(&path, 0, 10.0);
+        for (w, coeffs) in &t.table().weathers {
+            let Some(choice) = &coeffs.law_choice else {
+                continue;
+            };
+            let Some(refl) = &choice.reflectivity else {
+                panic!("seed {seed} {w:?}: the term was not compared");
+            };
+            eprintln!(
+                "seed {seed} {w:?}: chosen {} k {:?} {:?} gain {:.2} p {:.3} {:?}",
+                refl.chosen,
+                refl.exponents,
+                refl.exponent_ci95,
+                refl.gain_nats_per_recording,
+                refl.p_value,
+                refl.reason
+            );
+            assert!(!refl.chosen, "seed {seed} {w:?}: {refl:?}");
+            for k in refl.exponents.iter().flatten() {
+                assert!(k.abs() < 0.05, "seed {seed} {w:?}: k {k}");
+            }
+            assert!(
+                coeffs
+                    .vanishing_slope
+                    .iter()
+                    .all(|b| b.law.is_none_or(|l| l.reflectivity().is_none())),
+                "seed {seed} {w:?}: a term was written"
+            );
+        }
+    }
+}

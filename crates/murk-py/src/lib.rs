@@ -646,6 +646,7 @@ fn fit_params(params: Option<&Bound<'_, PyDict>>) -> PyResult<murk_fit::FitValid
                 "keep_unconfirmed_slopes" => p.require_edge(!b(&v)?),
                 "bend" => p.apply_bend(b(&v)?),
                 "no_law_comparison" => p.compare_laws(!b(&v)?),
+                "reflectivity_law" => p.reflectivity_law(b(&v)?),
                 "fixed_dropout" => p.free_dropout(!b(&v)?),
                 "bootstrap" | "bootstrap_replicates" => {
                     let n = u(&v)?;
@@ -657,7 +658,7 @@ fn fit_params(params: Option<&Bound<'_, PyDict>>) -> PyResult<murk_fit::FitValid
                 "radar_tolerance" | "radar_tolerance_m" => p.radar_tolerance_m(f(&v)?),
                 other => {
                     return Err(input(format!(
-                        "unknown fit parameter {other:?}: expected quantile, mor_bin_width, bands, sweep, ghost_range, ring_range, pairing_tolerance, pairing_tolerance_rel, min_points_per_bin, censor_fraction, edge, per_band_width, keep_unconfirmed_slopes, bend, no_law_comparison, fixed_dropout, bootstrap, seed, radar_tolerance (the flags of murk fit)"
+                        "unknown fit parameter {other:?}: expected quantile, mor_bin_width, bands, sweep, ghost_range, ring_range, pairing_tolerance, pairing_tolerance_rel, min_points_per_bin, censor_fraction, edge, per_band_width, keep_unconfirmed_slopes, bend, no_law_comparison, reflectivity_law, fixed_dropout, bootstrap, seed, radar_tolerance (the flags of murk fit)"
                     )));
                 }
             };

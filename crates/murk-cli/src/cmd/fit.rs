@@ -120,6 +120,13 @@ pub struct Args {
     /// time. Not with `--bend`, which needs it.
     #[arg(long, conflicts_with = "bend")]
     pub no_law_comparison: bool,
+    /// Fit a reflectivity term inside each band (`·(x/x_ref)^k`: the lidar
+    /// equation in fog gives each return its own vanishing distance by its
+    /// reflectivity) and compare it with the chosen law on held-out
+    /// recordings (`law_choice.reflectivity`); applied with `--bend`. About
+    /// doubles a fit's time.
+    #[arg(long, conflicts_with = "no_law_comparison")]
+    pub reflectivity_law: bool,
     /// Bootstrap replicates for rate uncertainties.
     #[arg(long, default_value_t = 1000)]
     pub bootstrap: u32,
@@ -163,6 +170,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .require_edge(!args.keep_unconfirmed_slopes)
         .apply_bend(args.bend)
         .compare_laws(!args.no_law_comparison)
+        .reflectivity_law(args.reflectivity_law)
         .bootstrap_replicates(args.bootstrap)
         .seed(args.seed)
         .radar_tolerance_m(args.radar_tolerance)

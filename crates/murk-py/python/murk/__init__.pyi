@@ -177,7 +177,7 @@ def fit(campaign: PathLike, *, threads: Optional[int] = None, **params: Any) -> 
     ``params`` are ``murk fit``'s flags with underscores: quantile, mor_bin_width,
     bands, sweep, ghost_range, ring_range, pairing_tolerance,
     pairing_tolerance_rel, min_points_per_bin, censor_fraction, edge,
-    per_band_width, keep_unconfirmed_slopes, bend, no_law_comparison, fixed_dropout,
+    per_band_width, keep_unconfirmed_slopes, bend, no_law_comparison, reflectivity_law, fixed_dropout,
     bootstrap, seed, radar_tolerance.
     ``fit(c).to_json()`` equals the file ``murk fit c --out T.json`` writes."""
 
