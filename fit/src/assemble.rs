@@ -755,7 +755,12 @@ fn bend_and_check(
     // The reflectivity term beside the law the comparison above prefers
     // (the power law when it wins, whether or not it is applied).
     let refl: Option<Vec<Option<crate::bend::ReflectivityFit>>> = deltas.map(|d| {
-        let fits = fit_reflectivities(&all, &fitted, wins, opts, bin);
+        // Start from the power law's exponent when it wins.
+        let from: Vec<Option<f64>> = powers
+            .iter()
+            .map(|f| f.as_ref().map(|f| f.exponent).filter(|_| wins))
+            .collect();
+        let fits = fit_reflectivities(&all, &fitted, &from, opts, bin);
         let ev = compare_reflectivity(
             recs,
             &fitted,
