@@ -330,7 +330,8 @@ fn physics_fog_with_narrow_bands_meets_the_truth_of_their_reflectivities() {
 }
 
 /// One and two threads give the same table bytes (the bend's folds and
-/// bootstraps are seeded per item, not per thread).
+/// bootstraps are seeded per item, not per thread), with and without the
+/// reflectivity term.
 #[test]
 fn bent_tables_are_the_same_bytes_on_one_and_two_threads() {
     let Some(capture) = capture() else {
@@ -352,6 +353,23 @@ fn bent_tables_are_the_same_bytes_on_one_and_two_threads() {
     };
     let (a, b) = (json(1), json(2));
     assert!(a.contains("\"law_choice\""));
+    assert_eq!(a, b);
+    // With the reflectivity term (its bands' and folds' profiles run in
+    // parallel too).
+    let json = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            fit_reflectivity(dir.path(), 50, PHYSICS_MOR_BIN_M)
+                .table()
+                .to_json()
+                .unwrap()
+        })
+    };
+    let (a, b) = (json(1), json(2));
+    assert!(a.contains("\"reference\":"), "the term is in the law");
     assert_eq!(a, b);
 }
 

@@ -131,6 +131,7 @@ impl Applier {
                     reflectivity_max: b.reflectivity_max,
                     slope: finite(b.slope),
                     vanishing_distance_m: finite(b.vanishing_distance_m),
+                    reflectivity: b.reflectivity,
                 })
                 .collect(),
             warnings: self.warnings.clone(),

@@ -259,6 +259,11 @@ pub struct BandSummaryRule {
     pub reflectivity_max: Option<f64>,
     /// Slope (null when the table has none and the model is the identity).
     pub slope: Option<f64>,
-    /// Vanishing distance, metres (null for the identity).
+    /// Vanishing distance, metres (null for the identity); with a
+    /// reflectivity term, at its reference reflectivity.
     pub vanishing_distance_m: Option<f64>,
+    /// The law's reflectivity term, when it has one: each return's distance
+    /// is `vanishing_distance_m · (max(x, floor)/reference)^exponent`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reflectivity: Option<murk_types::ReflectivityDependence>,
 }

@@ -275,3 +275,55 @@ fn no_law_comparison_is_said_in_the_table_and_refused_with_bend() {
     assert!(!o.status.success());
     assert!(stderr(&o).contains("--no-law-comparison"), "{}", stderr(&o));
 }
+
+/// `--reflectivity-law` puts the reflectivity term's comparison in the
+/// table (on a campaign whose truth has one distance per band: compared,
+/// not chosen, no term written) and its edges in the parameters; with
+/// `--no-law-comparison` it is refused.
+#[test]
+fn reflectivity_law_is_compared_and_refused_without_the_law_comparison() {
+    let dir = tempfile::tempdir().unwrap();
+    let campaign = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/default-campaign");
+    let out = dir.path().join("t.json");
+    let o = murk(&[
+        "fit",
+        s(&campaign),
+        "--out",
+        s(&out),
+        "--bootstrap",
+        "0",
+        "--bend",
+        "--reflectivity-law",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let t: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert_eq!(
+        t["provenance"]["parameters"]["reflectivity_law_edges"][0],
+        1.0
+    );
+    let mut compared = 0;
+    for (w, c) in t["weathers"].as_object().unwrap() {
+        if c["law_choice"].is_null() {
+            continue;
+        }
+        compared += 1;
+        let r = &c["law_choice"]["reflectivity"];
+        assert_eq!(r["chosen"], false, "{w}: {r}");
+        assert!(r["p_value"].as_f64().unwrap() > 0.01, "{w}: {r}");
+        for b in c["vanishing_slope"].as_array().unwrap() {
+            assert!(b["law"]["reflectivity"].is_null(), "{w}: {b}");
+        }
+    }
+    assert!(compared >= 2, "{compared} weathers compared");
+    let o = murk(&[
+        "fit",
+        s(&campaign),
+        "--out",
+        s(&out),
+        "--reflectivity-law",
+        "--no-law-comparison",
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--no-law-comparison"), "{}", stderr(&o));
+}

@@ -405,8 +405,10 @@ pub struct LawChoice {
 /// `≤ alpha`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ReflectivityChoice {
-    /// True when the term predicts held-out recordings significantly
-    /// better.
+    /// True when the term is applied: it predicts held-out recordings
+    /// significantly better and the fit was asked to apply it (murk fit's
+    /// `apply_bend`); a term that won but is not applied says so in
+    /// `reason`.
     pub chosen: bool,
     /// Per band, its exponent `k` fitted on all recordings (null for a
     /// band without a slope, or one whose reflectivities do not spread).
@@ -968,8 +970,17 @@ impl SlopeBand {
     /// Scales `edge_width` by `factor` (an edge re-fitted beside a model
     /// extension): `edge_width_corrected` follows it, with the survival
     /// fit's `mor_reading_noise` taken out again, and the intervals, which
-    /// were the fitted width's, go.
+    /// were the fitted width's, go. A law's reflectivity term carries the
+    /// width appliers use in its place; it is scaled alike.
     pub fn scale_edge_width(&mut self, factor: f64, mor_reading_noise: Option<f64>) {
+        if let Some(crate::VanishingLaw::Power {
+            reflectivity: Some(r),
+            ..
+        }) = self.law.as_mut()
+            && let Some(w) = r.edge_width.as_mut()
+        {
+            *w *= factor;
+        }
         if let Some(e) = self.edge_width.as_mut() {
             *e *= factor;
             self.edge_width_corrected =
@@ -1310,6 +1321,22 @@ mod tests {
         let mut none = band(0.0, None, 0.3);
         none.scale_edge_width(2.0, Some(0.05));
         assert_eq!(none, band(0.0, None, 0.3));
+        // A law's reflectivity term carries its own width: scaled too.
+        let mut r = band(0.0, None, 0.3);
+        r.edge_width = Some(0.1);
+        r.law = Some(crate::VanishingLaw::Power {
+            a: 1.0,
+            b: 0.8,
+            reflectivity: Some(crate::ReflectivityDependence {
+                exponent: 0.2,
+                reference: 20.0,
+                floor: 1.0,
+                edge_width: Some(0.04),
+            }),
+        });
+        r.scale_edge_width(1.5, None);
+        let w = r.law.unwrap().reflectivity().unwrap().edge_width.unwrap();
+        assert!((w - 0.06).abs() < 1e-15, "{w}");
     }
 
     fn table() -> CoefficientTable {

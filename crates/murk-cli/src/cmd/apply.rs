@@ -347,6 +347,14 @@ fn print_summary(
         let d = r
             .vanishing_distance_m
             .map_or("∞".to_string(), |v| format!("{v:.2} m"));
+        // Each return its own distance: say at which reflectivity.
+        let d = match &r.reflectivity {
+            Some(t) => format!(
+                "{d} at reflectivity {:.1}, times (x/{:.1})^{:.3}",
+                t.reference, t.reference, t.exponent
+            ),
+            None => d,
+        };
         outln!(
             "  reflectivity [{}, {hi}): {} in, {} vanished (beyond {d})",
             b.reflectivity_min,
