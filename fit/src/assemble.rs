@@ -642,6 +642,40 @@ fn reflectivity_deltas(
     })
 }
 
+/// An exponent's interval from its estimate and its fits without each fold.
+type JackknifeInterval = fn(f64, &[Option<f64>]) -> Result<[f64; 2], String>;
+
+/// Per band, the grouped-jackknife interval of an exponent estimated on all
+/// recordings (`estimates`) from the held-out comparison's fits without
+/// each fold (`interval`: [`crate::bend::jackknife_interval`] or its
+/// reflectivity form); `None` when the comparison failed.
+fn fold_intervals(
+    estimates: impl Iterator<Item = Option<f64>>,
+    evidence: &Result<crate::bend::LawEvidence, String>,
+    interval: JackknifeInterval,
+) -> Option<Vec<Option<Interval>>> {
+    let e = evidence.as_ref().ok()?;
+    Some(
+        estimates
+            .enumerate()
+            .map(|(b, estimate)| {
+                let leave_out: Vec<Option<f64>> = e.fold_exponents.iter().map(|fe| fe[b]).collect();
+                let [low, high] = interval(estimate?, &leave_out).ok()?;
+                Some(Interval {
+                    low,
+                    high,
+                    level: 0.95,
+                    method: format!(
+                        "grouped jackknife over {} folds of recordings (Student t on {} df)",
+                        leave_out.len(),
+                        leave_out.len() - 1
+                    ),
+                })
+            })
+            .collect(),
+    )
+}
+
 /// The law that bends ([`crate::bend`]): fits `a·MOR^c` beside the line,
 /// chooses on held-out recordings, writes the chosen law into the bands,
 /// and fills each band's per-MOR-bin 50 % ranges and the line's lack of
@@ -711,29 +745,12 @@ fn bend_and_check(
             .iter()
             .map(|f| f.as_ref().map(|f| f.exponent))
             .collect(),
-        exponent_ci95: match &evidence {
-            Ok(e) => powers
-                .iter()
-                .enumerate()
-                .map(|(b, f)| {
-                    let f = f.as_ref()?;
-                    let leave_out: Vec<Option<f64>> =
-                        e.fold_exponents.iter().map(|fe| fe[b]).collect();
-                    let [low, high] = crate::bend::jackknife_interval(f.exponent, &leave_out).ok()?;
-                    Some(Interval {
-                        low,
-                        high,
-                        level: 0.95,
-                        method: format!(
-                            "grouped jackknife over {} folds of recordings (Student t on {} df)",
-                            leave_out.len(),
-                            leave_out.len() - 1
-                        ),
-                    })
-                })
-                .collect(),
-            Err(_) => Vec::new(),
-        },
+        exponent_ci95: fold_intervals(
+            powers.iter().map(|f| f.as_ref().map(|f| f.exponent)),
+            &evidence,
+            crate::bend::jackknife_interval,
+        )
+        .unwrap_or_default(),
         gain_nats_per_recording: evidence.as_ref().map_or(0.0, |e| e.gain),
         recordings_better: evidence.as_ref().map_or(0, |e| e.better as u32),
         recordings: evidence.as_ref().map_or(0, |e| e.recordings as u32),
@@ -779,33 +796,12 @@ fn bend_and_check(
                 .iter()
                 .map(|f| f.as_ref().map(|f| f.reflectivity_exponent))
                 .collect(),
-            exponent_ci95: match &ev {
-                Ok(e) => fits
-                    .iter()
-                    .enumerate()
-                    .map(|(b, f)| {
-                        let f = f.as_ref()?;
-                        let leave_out: Vec<Option<f64>> =
-                            e.fold_exponents.iter().map(|fe| fe[b]).collect();
-                        let [low, high] = crate::bend::reflectivity_jackknife_interval(
-                            f.reflectivity_exponent,
-                            &leave_out,
-                        )
-                        .ok()?;
-                        Some(Interval {
-                            low,
-                            high,
-                            level: 0.95,
-                            method: format!(
-                                "grouped jackknife over {} folds of recordings (Student t on {} df)",
-                                leave_out.len(),
-                                leave_out.len() - 1
-                            ),
-                        })
-                    })
-                    .collect(),
-                Err(_) => vec![None; fits.len()],
-            },
+            exponent_ci95: fold_intervals(
+                fits.iter().map(|f| f.as_ref().map(|f| f.reflectivity_exponent)),
+                &ev,
+                crate::bend::reflectivity_jackknife_interval,
+            )
+            .unwrap_or_else(|| vec![None; fits.len()]),
             references: d
                 .ln_reference
                 .iter()

@@ -289,6 +289,75 @@ pub fn compare_laws(
     seed: [u8; 32],
 ) -> Result<LawEvidence, String> {
     let n_bands = fitted.len();
+    let lp = |p: f64| p.clamp(1e-12, 1.0 - 1e-12);
+    held_out(recs, folds, seed, |train, held| {
+        // The line with the same per-band freedom (edge width, ε, π) as the
+        // power law, so the comparison weighs the exponent alone.
+        let lines: Vec<Option<SurvivalResult>> = (0..n_bands)
+            .map(|b| {
+                fitted[b]
+                    .then(|| fit_band_at(train, n_bands, b, 1.0, opts, bin))
+                    .flatten()
+            })
+            .collect();
+        let powers = fit_powers(train, fitted, opts, bin);
+        if powers.iter().zip(fitted).any(|(p, f)| *f && p.is_none()) {
+            return Err(
+                "the power law could not be fitted with a fold of recordings left out".into(),
+            );
+        }
+        let exponents = powers
+            .iter()
+            .map(|p| p.as_ref().map(|p| p.exponent))
+            .collect();
+        let mut gains = Vec::new();
+        for r in held {
+            let mut d = 0.0;
+            let mut any = false;
+            for (b, power) in powers.iter().enumerate() {
+                let (Some(power), Some(line)) = (power, &lines[b]) else {
+                    continue;
+                };
+                let shift = (1.0 - power.exponent) * r.mor.ln();
+                for o in &r.bands[b] {
+                    let (Some(pl), Some(pp)) = (
+                        line.keep_probability(opts, b, o.u),
+                        power
+                            .fit
+                            .keep_probability(opts, b, (o.u.ln() + shift).exp()),
+                    ) else {
+                        continue;
+                    };
+                    let (pl, pp) = (lp(pl), lp(pp));
+                    any = true;
+                    d += o.kept * (pp / pl).ln()
+                        + (o.total - o.kept) * ((1.0 - pp) / (1.0 - pl)).ln();
+                }
+            }
+            if any {
+                gains.push(d);
+            }
+        }
+        Ok((exponents, gains))
+    })
+}
+
+/// The held-out comparison's frame, shared by [`compare_laws`] and
+/// [`compare_reflectivity`]: `folds` folds of `recs` interleaved in MOR
+/// order; `fold(train, held)` fits on the training recordings and returns
+/// its exponents and the gains of the held-out recordings it could score.
+/// Folds run in parallel; the gains are put back in fold order, so the
+/// result is the same on any thread count.
+fn held_out<F>(
+    recs: &[RecordingTrials],
+    folds: usize,
+    seed: [u8; 32],
+    fold: F,
+) -> Result<LawEvidence, String>
+where
+    F: Fn(&[&RecordingTrials], &[&RecordingTrials]) -> Result<(Vec<Option<f64>>, Vec<f64>), String>
+        + Sync,
+{
     let g_n = recs.len();
     if g_n < folds.max(3) {
         return Err(format!(
@@ -297,67 +366,22 @@ pub fn compare_laws(
     }
     let mors: Vec<f64> = recs.iter().map(|r| r.mor).collect();
     let fold_of = crate::stats::interleaved_folds(&mors, folds);
-    let lp = |p: f64| p.clamp(1e-12, 1.0 - 1e-12);
-    // Each fold's fits and its recordings' gains, folds in parallel: every
-    // fold's work depends on the recordings alone, and the gains are put
-    // back in fold order, so the result is the same on any thread count.
     type Fold = Result<(Vec<Option<f64>>, Vec<f64>), String>;
     let per_fold: Vec<Fold> = (0..folds)
         .into_par_iter()
         .map(|f| {
-            let train: Vec<&RecordingTrials> = (0..g_n)
-                .filter(|&g| fold_of[g] != f)
+            let (held, train): (Vec<&RecordingTrials>, Vec<&RecordingTrials>) = (0..g_n)
                 .map(|g| &recs[g])
-                .collect();
-            // The line with the same per-band freedom (edge width, ε, π) as the
-            // power law, so the comparison weighs the exponent alone.
-            let lines: Vec<Option<SurvivalResult>> = (0..n_bands)
-                .map(|b| {
-                    fitted[b]
-                        .then(|| fit_band_at(&train, n_bands, b, 1.0, opts, bin))
-                        .flatten()
-                })
-                .collect();
-            let powers = fit_powers(&train, fitted, opts, bin);
-            if powers.iter().zip(fitted).any(|(p, f)| *f && p.is_none()) {
-                return Err(
-                    "the power law could not be fitted with a fold of recordings left out".into(),
-                );
-            }
-            let exponents = powers
-                .iter()
-                .map(|p| p.as_ref().map(|p| p.exponent))
-                .collect();
-            let mut gains = Vec::new();
-            for g in (0..g_n).filter(|&g| fold_of[g] == f) {
-                let r = &recs[g];
-                let mut d = 0.0;
-                let mut any = false;
-                for (b, power) in powers.iter().enumerate() {
-                    let (Some(power), Some(line)) = (power, &lines[b]) else {
-                        continue;
-                    };
-                    let shift = (1.0 - power.exponent) * r.mor.ln();
-                    for o in &r.bands[b] {
-                        let (Some(pl), Some(pp)) = (
-                            line.keep_probability(opts, b, o.u),
-                            power
-                                .fit
-                                .keep_probability(opts, b, (o.u.ln() + shift).exp()),
-                        ) else {
-                            continue;
-                        };
-                        let (pl, pp) = (lp(pl), lp(pp));
-                        any = true;
-                        d += o.kept * (pp / pl).ln()
-                            + (o.total - o.kept) * ((1.0 - pp) / (1.0 - pl)).ln();
+                .zip(&fold_of)
+                .fold((Vec::new(), Vec::new()), |(mut h, mut t), (r, &k)| {
+                    if k == f {
+                        h.push(r)
+                    } else {
+                        t.push(r)
                     }
-                }
-                if any {
-                    gains.push(d);
-                }
-            }
-            Ok((exponents, gains))
+                    (h, t)
+                });
+            fold(&train, &held)
         })
         .collect();
     let mut gains = Vec::new();
@@ -544,106 +568,69 @@ pub fn compare_reflectivity(
     seed: [u8; 32],
 ) -> Result<LawEvidence, String> {
     let n_bands = fitted.len();
-    let g_n = recs.len();
-    if g_n < folds.max(3) {
-        return Err(format!(
-            "too few recordings ({g_n}) to compare the laws on held-out recordings"
-        ));
-    }
-    let mors: Vec<f64> = recs.iter().map(|r| r.mor).collect();
-    let fold_of = crate::stats::interleaved_folds(&mors, folds);
-    type Fold = Result<(Vec<Option<f64>>, Vec<f64>), String>;
-    let per_fold: Vec<Fold> = (0..folds)
-        .into_par_iter()
-        .map(|f| {
-            let train: Vec<&RecordingTrials> = (0..g_n)
-                .filter(|&g| fold_of[g] != f)
-                .map(|g| &recs[g])
-                .collect();
-            // The law without the term: (exponent, fit) per band.
-            let base: Vec<Option<(f64, SurvivalResult)>> = (0..n_bands)
-                .map(|b| {
-                    if !fitted[b] {
-                        None
-                    } else if bend {
-                        fit_power(&train, n_bands, b, opts, bin).map(|p| (p.exponent, p.fit))
-                    } else {
-                        fit_band_at(&train, n_bands, b, 1.0, opts, bin).map(|r| (1.0, r))
-                    }
-                })
-                .collect();
-            let from: Vec<Option<f64>> = base
-                .iter()
-                .map(|b| b.as_ref().map(|(c, _)| *c).filter(|_| bend))
-                .collect();
-            let alt = fit_reflectivities(&train, fitted, &from, opts, bin);
-            if alt.iter().zip(fitted).any(|(p, f)| *f && p.is_none()) {
-                return Err(
-                    "the reflectivity term could not be fitted with a fold of recordings left out"
-                        .into(),
-                );
-            }
-            let exponents = alt
-                .iter()
-                .map(|p| p.as_ref().map(|p| p.reflectivity_exponent))
-                .collect();
-            let mut gains = Vec::new();
-            for g in (0..g_n).filter(|&g| fold_of[g] == f) {
-                let r = &recs[g];
-                let mut d = 0.0;
-                let mut any = false;
-                for (b, alt) in alt.iter().enumerate() {
-                    let (Some(alt), Some((c0, base))) = (alt, &base[b]) else {
-                        continue;
-                    };
-                    let l0 = log_likelihood(base, opts, b, &r.bands[b], (1.0 - c0) * r.mor.ln());
-                    let shift = (1.0 - alt.exponent) * r.mor.ln();
-                    let l1: Option<f64> = r
-                        .classes
-                        .get(b)
-                        .into_iter()
-                        .flatten()
-                        .map(|(delta, obs)| {
-                            log_likelihood(
-                                &alt.fit,
-                                opts,
-                                b,
-                                obs,
-                                shift - alt.reflectivity_exponent * delta,
-                            )
-                        })
-                        .sum();
-                    if let (Some(l0), Some(l1)) = (l0, l1) {
-                        any = true;
-                        d += l1 - l0;
-                    }
+    held_out(recs, folds, seed, |train, held| {
+        // The law without the term: (exponent, fit) per band.
+        let base: Vec<Option<(f64, SurvivalResult)>> = (0..n_bands)
+            .map(|b| {
+                if !fitted[b] {
+                    None
+                } else if bend {
+                    fit_power(train, n_bands, b, opts, bin).map(|p| (p.exponent, p.fit))
+                } else {
+                    fit_band_at(train, n_bands, b, 1.0, opts, bin).map(|r| (1.0, r))
                 }
-                if any {
-                    gains.push(d);
+            })
+            .collect();
+        let from: Vec<Option<f64>> = base
+            .iter()
+            .map(|b| b.as_ref().map(|(c, _)| *c).filter(|_| bend))
+            .collect();
+        let alt = fit_reflectivities(train, fitted, &from, opts, bin);
+        if alt.iter().zip(fitted).any(|(p, f)| *f && p.is_none()) {
+            return Err(
+                "the reflectivity term could not be fitted with a fold of recordings left out"
+                    .into(),
+            );
+        }
+        let exponents = alt
+            .iter()
+            .map(|p| p.as_ref().map(|p| p.reflectivity_exponent))
+            .collect();
+        let mut gains = Vec::new();
+        for r in held {
+            let mut d = 0.0;
+            let mut any = false;
+            for (b, alt) in alt.iter().enumerate() {
+                let (Some(alt), Some((c0, base))) = (alt, &base[b]) else {
+                    continue;
+                };
+                let l0 = log_likelihood(base, opts, b, &r.bands[b], (1.0 - c0) * r.mor.ln());
+                let shift = (1.0 - alt.exponent) * r.mor.ln();
+                let l1: Option<f64> = r
+                    .classes
+                    .get(b)
+                    .into_iter()
+                    .flatten()
+                    .map(|(delta, obs)| {
+                        log_likelihood(
+                            &alt.fit,
+                            opts,
+                            b,
+                            obs,
+                            shift - alt.reflectivity_exponent * delta,
+                        )
+                    })
+                    .sum();
+                if let (Some(l0), Some(l1)) = (l0, l1) {
+                    any = true;
+                    d += l1 - l0;
                 }
             }
-            Ok((exponents, gains))
-        })
-        .collect();
-    let mut gains = Vec::new();
-    let mut fold_exponents = Vec::with_capacity(folds);
-    for f in per_fold {
-        let (exponents, g) = f?;
-        fold_exponents.push(exponents);
-        gains.extend(g);
-    }
-    let n = gains.len();
-    if n < 3 {
-        return Err(format!(
-            "too few recordings with fitted bands ({n}) to compare the laws"
-        ));
-    }
-    Ok(LawEvidence {
-        gain: gains.iter().sum::<f64>() / n as f64,
-        p: sign_flip_p(&gains, seed),
-        recordings: n,
-        better: gains.iter().filter(|x| **x > 0.0).count(),
-        fold_exponents,
+            if any {
+                gains.push(d);
+            }
+        }
+        Ok((exponents, gains))
     })
 }
 

@@ -610,6 +610,65 @@ fn fit_reflectivity(path: &Path, replicates: u32, mor_bin_m: f64) -> FittedTable
         .unwrap()
 }
 
+/// A band's reflectivity term against the physics: asserts its `k` lies
+/// within the simulator's own `d ln R₅₀/d ln x` at the band's reference
+/// (over the covered bins' MORs, 10 % either side), and returns, per
+/// covered bin and at the 10th, 50th and 90th percentiles of `xs` (the
+/// band's clear reflectivities), the MOR, the reflectivity and the law's
+/// relative error against the simulator's 50 % range of that reflectivity.
+fn term_against_physics(
+    phys: &PhysicsFog,
+    b: &murk_types::SlopeBand,
+    mut xs: Vec<f64>,
+    what: &str,
+) -> Vec<(f64, f64, f64)> {
+    let law = b.law.expect("the term is applied");
+    let term = law.reflectivity().expect("with its reflectivity term");
+    let covered: Vec<f64> = b
+        .survival_bins
+        .iter()
+        .filter(|bin| bin.half_survival_range_m.is_some())
+        .map(|bin| bin.mor_m)
+        .collect();
+    let h = 1.5f64;
+    let (klo, khi) = covered
+        .iter()
+        .filter_map(|&mor| {
+            let up = phys.half_survival_range_m(term.reference * h, mor)?;
+            let down = phys.half_survival_range_m(term.reference / h, mor)?;
+            Some((up / down).ln() / (2.0 * h.ln()))
+        })
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, c), k| {
+            (a.min(k), c.max(k))
+        });
+    eprintln!(
+        "  {what} band [{}, {:?}): k {:.3}, the simulator's {klo:.3}–{khi:.3}; law {}",
+        b.reflectivity_min,
+        b.reflectivity_max,
+        term.exponent,
+        law.describe()
+    );
+    assert!(
+        term.exponent > klo * 0.9 && term.exponent < khi * 1.1,
+        "{what} band {}: k {} outside the simulator's {klo}–{khi}",
+        b.reflectivity_min,
+        term.exponent
+    );
+    xs.sort_by(f64::total_cmp);
+    let pct = |q: f64| xs[((xs.len() - 1) as f64 * q).round() as usize];
+    covered
+        .iter()
+        .flat_map(|&mor| {
+            [0.1, 0.5, 0.9].map(|q| {
+                let x = pct(q);
+                let truth = phys.half_survival_range_m(x, mor).unwrap();
+                let d = law.distance_m(mor, 1.0) * law.reflectivity_factor(x);
+                (mor, x, d / truth - 1.0)
+            })
+        })
+        .collect()
+}
+
 /// The seed's two bands with a reflectivity term inside each
 /// (`reflectivity_law`): on the physics fog the term must be chosen on
 /// held-out recordings in every seed, its exponent `k` must match the
@@ -663,9 +722,7 @@ fn physics_fog_with_a_reflectivity_term_meets_the_truth_of_each_reflectivity() {
             if b.slope.is_none() {
                 continue;
             }
-            let law = b.law.expect("the term is applied");
-            let term = law.reflectivity().expect("with its reflectivity term");
-            let mut xs: Vec<f64> = scene
+            let xs: Vec<f64> = scene
                 .iter()
                 .flat_map(|c| {
                     (0..c.len())
@@ -673,8 +730,18 @@ fn physics_fog_with_a_reflectivity_term_meets_the_truth_of_each_reflectivity() {
                 })
                 .filter(|x| b.contains(*x))
                 .collect();
-            xs.sort_by(f64::total_cmp);
-            let pct = |q: f64| xs[((xs.len() - 1) as f64 * q).round() as usize];
+            for (mor, x, err) in term_against_physics(&phys, b, xs, &format!("seed {seed}")) {
+                points += 1;
+                points_within += usize::from(err.abs() < 0.05);
+                points_worst = points_worst.max(err.abs());
+                if err.abs() >= 0.1 {
+                    failures.push(format!(
+                        "seed {seed} band {} MOR {mor:.1} x {x}: {:+.1} %",
+                        b.reflectivity_min,
+                        err * 100.0
+                    ));
+                }
+            }
             let returns: Vec<(f64, f64)> = scene
                 .iter()
                 .flat_map(|c| {
@@ -685,57 +752,9 @@ fn physics_fog_with_a_reflectivity_term_meets_the_truth_of_each_reflectivity() {
                 })
                 .filter(|(_, x)| b.contains(*x))
                 .collect();
-            // The simulator's own exponent at the reference reflectivity.
-            let h = 1.5f64;
-            let k_truth = |mor: f64| {
-                let up = phys.half_survival_range_m(term.reference * h, mor)?;
-                let down = phys.half_survival_range_m(term.reference / h, mor)?;
-                Some((up / down).ln() / (2.0 * h.ln()))
-            };
-            let ks: Vec<f64> = b
-                .survival_bins
-                .iter()
-                .filter(|bin| bin.half_survival_range_m.is_some())
-                .filter_map(|bin| k_truth(bin.mor_m))
-                .collect();
-            let (klo, khi) = ks
-                .iter()
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, c), k| {
-                    (a.min(*k), c.max(*k))
-                });
-            eprintln!(
-                "  band [{}, {:?}): k {:.3}, the simulator's {klo:.3}–{khi:.3}; law {}",
-                b.reflectivity_min,
-                b.reflectivity_max,
-                term.exponent,
-                law.describe()
-            );
-            assert!(
-                term.exponent > klo * 0.9 && term.exponent < khi * 1.1,
-                "seed {seed} band {}: k {} outside the simulator's {klo}–{khi}",
-                b.reflectivity_min,
-                term.exponent
-            );
             for bin in &b.survival_bins {
                 if bin.half_survival_range_m.is_none() {
                     continue;
-                }
-                for q in [0.1, 0.5, 0.9] {
-                    let x = pct(q);
-                    let truth = phys.half_survival_range_m(x, bin.mor_m).unwrap();
-                    let d = law.distance_m(bin.mor_m, 1.0) * law.reflectivity_factor(x);
-                    let err = d / truth - 1.0;
-                    points += 1;
-                    points_within += usize::from(err.abs() < 0.05);
-                    points_worst = points_worst.max(err.abs());
-                    if err.abs() >= 0.1 {
-                        failures.push(format!(
-                            "seed {seed} band {} MOR {:.1} x {x}: {:+.1} %",
-                            b.reflectivity_min,
-                            bin.mor_m,
-                            err * 100.0
-                        ));
-                    }
                 }
                 let truth = phys
                     .scene_half_survival_range_m(&returns, bin.mor_m)
@@ -874,73 +893,28 @@ fn physics_fog_on_a_nuscenes_scan_meets_the_truth_of_each_reflectivity() {
     let (mut points, mut worst) = (0usize, 0f64);
     let mut failures = Vec::new();
     for b in &fog.vanishing_slope {
-        let law = b.law.expect("every band has a law");
-        let term = law.reflectivity().expect("with its reflectivity term");
-        let mut xs: Vec<f64> = (0..cloud.len())
+        let xs: Vec<f64> = (0..cloud.len())
             .map(|i| cloud.intensity_scale.to_calibrated(cloud.intensity[i]) as f64)
             .filter(|x| b.contains(*x))
             .collect();
-        xs.sort_by(f64::total_cmp);
-        let pct = |q: f64| xs[((xs.len() - 1) as f64 * q).round() as usize];
-        let h = 1.5f64;
-        let ks: Vec<f64> = b
-            .survival_bins
-            .iter()
-            .filter(|bin| bin.half_survival_range_m.is_some())
-            .filter_map(|bin| {
-                let up = phys.half_survival_range_m(term.reference * h, bin.mor_m)?;
-                let down = phys.half_survival_range_m(term.reference / h, bin.mor_m)?;
-                Some((up / down).ln() / (2.0 * h.ln()))
-            })
-            .collect();
-        let (klo, khi) = ks
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, c), k| {
-                (a.min(*k), c.max(*k))
-            });
-        eprintln!(
-            "band [{}, {:?}): k {:.3}, the simulator's {klo:.3}–{khi:.3}; law {}",
-            b.reflectivity_min,
-            b.reflectivity_max,
-            term.exponent,
-            law.describe()
-        );
+        let cases = term_against_physics(&phys, b, xs, "nuScenes");
         assert!(
-            term.exponent > klo * 0.9 && term.exponent < khi * 1.1,
-            "band {}: k {} outside the simulator's {klo}–{khi}",
+            cases.len() >= 15,
+            "band {}: {} cases",
             b.reflectivity_min,
-            term.exponent
+            cases.len()
         );
-        let mut covered = 0;
-        for bin in &b.survival_bins {
-            if bin.half_survival_range_m.is_none() {
-                continue;
-            }
-            covered += 1;
-            for q in [0.1, 0.5, 0.9] {
-                let x = pct(q);
-                let truth = phys.half_survival_range_m(x, bin.mor_m).unwrap();
-                let d = law.distance_m(bin.mor_m, 1.0) * law.reflectivity_factor(x);
-                let err = d / truth - 1.0;
-                eprintln!(
-                    "  MOR {:5.1} m ({} rec) x {x:5.1}: truth {truth:6.2} law {d:6.2} ({:+.1} %)",
-                    bin.mor_m,
-                    bin.recordings,
+        for (mor, x, err) in cases {
+            points += 1;
+            worst = worst.max(err.abs());
+            if err.abs() >= 0.05 {
+                failures.push(format!(
+                    "band {} MOR {mor:.1} x {x}: {:+.1} %",
+                    b.reflectivity_min,
                     err * 100.0
-                );
-                points += 1;
-                worst = worst.max(err.abs());
-                if err.abs() >= 0.05 {
-                    failures.push(format!(
-                        "band {} MOR {:.1} x {x}: {:+.1} %",
-                        b.reflectivity_min,
-                        bin.mor_m,
-                        err * 100.0
-                    ));
-                }
+                ));
             }
         }
-        assert!(covered >= 5, "band {}: {covered} bins", b.reflectivity_min);
     }
     eprintln!("nuScenes: {points} cases, worst {:.1} %", worst * 100.0);
     assert!(failures.is_empty(), "{failures:?}");

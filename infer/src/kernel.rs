@@ -247,23 +247,27 @@ pub(crate) fn hard_mask(h: &Hard, cloud: &PointCloud, mask: &mut Vec<u8>) -> Vec
         .collect()
 }
 
-/// Hard-threshold mask when a band's law has a reflectivity term: each
-/// point's distance is its band's times the term's factor at its own
-/// calibrated reflectivity ([`BandRule::distance_at`]), so the per-band
-/// squared thresholds of [`hard_mask`] do not apply. Same counts, same
-/// chunks.
-pub(crate) fn hard_mask_by_reflectivity(
+/// A mask decided point by point: `keep(state, band, range, raw)` for each
+/// point, `state` made per chunk by `chunk_state(chunk)` (the soft edge's
+/// random stream), chunks in parallel, counts per chunk.
+fn point_mask<S, F, K>(
     bands: &[BandRule],
     cloud: &PointCloud,
     mask: &mut Vec<u8>,
-) -> Vec<Counts> {
-    let scale = cloud.intensity_scale;
-    let edges = Edges::new(bands, scale);
+    chunk_state: F,
+    keep: K,
+) -> Vec<Counts>
+where
+    F: Fn(usize) -> S + Sync,
+    K: Fn(&mut S, usize, f64, f32) -> bool + Sync,
+{
+    let edges = Edges::new(bands, cloud.intensity_scale);
     mask.clear();
     mask.resize(cloud.len(), 0);
     mask.par_chunks_mut(CHUNK)
         .enumerate()
         .map(|(c, m)| {
+            let mut state = chunk_state(c);
             let s = c * CHUNK;
             let mut counts = Counts {
                 n: m.len() as u64,
@@ -276,13 +280,33 @@ pub(crate) fn hard_mask_by_reflectivity(
                 let r = (cloud.x[i] as f64)
                     .hypot(cloud.y[i] as f64)
                     .hypot(cloud.z[i] as f64);
-                let keep = r <= bands[b].distance_at(scale.to_calibrated(raw) as f64);
-                *slot = keep as u8;
-                counts.add_point(&edges, raw, keep);
+                let k = keep(&mut state, b, r, raw);
+                *slot = k as u8;
+                counts.add_point(&edges, raw, k);
             }
             counts
         })
         .collect()
+}
+
+/// Hard-threshold mask when a band's law has a reflectivity term: each
+/// point's distance is its band's times the term's factor at its own
+/// calibrated reflectivity ([`BandRule::distance_at`]), so the per-band
+/// squared thresholds of [`hard_mask`] do not apply. Same counts, same
+/// chunks.
+pub(crate) fn hard_mask_by_reflectivity(
+    bands: &[BandRule],
+    cloud: &PointCloud,
+    mask: &mut Vec<u8>,
+) -> Vec<Counts> {
+    let scale = cloud.intensity_scale;
+    point_mask(
+        bands,
+        cloud,
+        mask,
+        |_| (),
+        |_, b, r, raw| r <= bands[b].distance_at(scale.to_calibrated(raw) as f64),
+    )
 }
 
 /// Soft-edge mask: each point survives with the fitted probability, drawn
@@ -295,45 +319,29 @@ pub(crate) fn soft_mask(
     seed: ScanSeed,
     mask: &mut Vec<u8>,
 ) -> Vec<Counts> {
-    let edges = Edges::new(bands, cloud.intensity_scale);
+    let scale = cloud.intensity_scale;
     let centre: Vec<f64> = bands.iter().map(|b| b.slope * mor_scaled).collect();
     let width: Vec<f64> = bands
         .iter()
         .map(|b| b.edge_width.unwrap_or(f64::NAN) * b.slope * mor_scaled)
         .collect();
-    mask.clear();
-    mask.resize(cloud.len(), 0);
-    mask.par_chunks_mut(CHUNK)
-        .enumerate()
-        .map(|(c, m)| {
-            let mut rng = seed.rng(Purpose::SoftEdge, c as u64);
-            let s = c * CHUNK;
-            let mut counts = Counts {
-                n: m.len() as u64,
-                ..Counts::default()
-            };
-            for (j, slot) in m.iter_mut().enumerate() {
-                let i = s + j;
-                let raw = cloud.intensity[i];
-                let b = edges.band_of(raw);
-                let r = (cloud.x[i] as f64)
-                    .hypot(cloud.y[i] as f64)
-                    .hypot(cloud.z[i] as f64);
-                // The edge's centre and width both scale with a
-                // reflectivity term's factor (the width is relative).
-                let f = bands[b].reflectivity.map_or(1.0, |t| {
-                    t.factor(cloud.intensity_scale.to_calibrated(raw) as f64)
-                });
-                let zc = (r - centre[b] * f) / (width[b] * f);
-                let p = soft.keep_probability_given_clear(zc);
-                let u: f64 = rng.random();
-                let keep = u < p;
-                *slot = keep as u8;
-                counts.add_point(&edges, raw, keep);
-            }
-            counts
-        })
-        .collect()
+    point_mask(
+        bands,
+        cloud,
+        mask,
+        |c| seed.rng(Purpose::SoftEdge, c as u64),
+        |rng, b, r, raw| {
+            // The edge's centre and width both scale with a reflectivity
+            // term's factor (the width is relative).
+            let f = bands[b]
+                .reflectivity
+                .map_or(1.0, |t| t.factor(scale.to_calibrated(raw) as f64));
+            let zc = (r - centre[b] * f) / (width[b] * f);
+            let p = soft.keep_probability_given_clear(zc);
+            let u: f64 = rng.random();
+            u < p
+        },
+    )
 }
 
 impl Counts {
