@@ -339,36 +339,24 @@ fn bent_tables_are_the_same_bytes_on_one_and_two_threads() {
     };
     let dir = tempfile::tempdir().unwrap();
     semi_real::vlp16_campaign(&capture, dir.path(), &physics_cfg(), 4).unwrap();
-    let json = |threads: usize| {
+    let json = |threads: usize, fit: fn(&Path, u32, f64) -> FittedTable| {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .build()
             .unwrap();
         pool.install(|| {
-            fit_binned(dir.path(), 50, PHYSICS_MOR_BIN_M)
+            fit(dir.path(), 50, PHYSICS_MOR_BIN_M)
                 .table()
                 .to_json()
                 .unwrap()
         })
     };
-    let (a, b) = (json(1), json(2));
+    let (a, b) = (json(1, fit_binned), json(2, fit_binned));
     assert!(a.contains("\"law_choice\""));
     assert_eq!(a, b);
     // With the reflectivity term (its bands' and folds' profiles run in
     // parallel too).
-    let json = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        pool.install(|| {
-            fit_reflectivity(dir.path(), 50, PHYSICS_MOR_BIN_M)
-                .table()
-                .to_json()
-                .unwrap()
-        })
-    };
-    let (a, b) = (json(1), json(2));
+    let (a, b) = (json(1, fit_reflectivity), json(2, fit_reflectivity));
     assert!(a.contains("\"reference\":"), "the term is in the law");
     assert_eq!(a, b);
 }
