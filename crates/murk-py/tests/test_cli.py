@@ -91,6 +91,14 @@ def test_fit_equals_cli(fitted):
     assert "fog" in t.weathers
 
 
+def test_fit_with_the_reflectivity_law_equals_cli(tmp_path, cli):
+    out = tmp_path / "t.json"
+    run_cli(cli, "fit", CAMPAIGN, "--out", out, "--bootstrap", "20", "--bend", "--reflectivity-law")
+    t = murk.fit(CAMPAIGN, bootstrap=20, bend=True, reflectivity_law=True)
+    assert t.to_json() == out.read_text()
+    assert "reflectivity" in json.loads(out.read_text())["weathers"]["fog"]["law_choice"]
+
+
 def test_cli_error_message_is_the_exception_message(tmp_path, cli, fitted):
     bad = tmp_path / "bad.bin"
     bad.write_bytes(b"\0" * 18)
