@@ -58,6 +58,21 @@ fn clear_scene(capture: &Path, n: usize) -> Vec<PointCloud> {
     c.frames.into_iter().take(n).collect()
 }
 
+/// The `(range, calibrated reflectivity)` of the clear scene's returns in
+/// band `b`.
+fn band_returns(scene: &[PointCloud], b: &murk_types::SlopeBand) -> Vec<(f64, f64)> {
+    scene
+        .iter()
+        .flat_map(|c| {
+            (0..c.len()).map(move |i| {
+                let r = (c.x[i] as f64).hypot(c.y[i] as f64).hypot(c.z[i] as f64);
+                (r, c.intensity_scale.to_calibrated(c.intensity[i]) as f64)
+            })
+        })
+        .filter(|(_, x)| b.contains(*x))
+        .collect()
+}
+
 /// MOR bins of the physics campaigns: the real scene is small (90 % of its
 /// returns within 7.3 m, none beyond 24 m), so its fog is dense (MOR 4–30
 /// m) and its bins narrow.
@@ -156,16 +171,7 @@ fn physics_fog_bends_and_the_bent_law_meets_the_truth_in_every_bin() {
                 continue;
             };
             // The band's clear returns of the scene.
-            let returns: Vec<(f64, f64)> = scene
-                .iter()
-                .flat_map(|c| {
-                    (0..c.len()).map(move |i| {
-                        let r = (c.x[i] as f64).hypot(c.y[i] as f64).hypot(c.z[i] as f64);
-                        (r, c.intensity_scale.to_calibrated(c.intensity[i]) as f64)
-                    })
-                })
-                .filter(|(_, x)| b.contains(*x))
-                .collect();
+            let returns = band_returns(&scene, b);
             let lof = b.lack_of_fit.as_ref();
             eprintln!(
                 "physics seed {seed}: band [{}, {:?}) line slope {:.4}, law {:?}, lack of fit {:?}",
@@ -278,13 +284,9 @@ fn physics_fog_with_narrow_bands_meets_the_truth_of_their_reflectivities() {
             if b.slope.is_none() {
                 continue;
             }
-            let reflectivities: Vec<f64> = scene
-                .iter()
-                .flat_map(|c| {
-                    (0..c.len())
-                        .map(move |i| c.intensity_scale.to_calibrated(c.intensity[i]) as f64)
-                })
-                .filter(|x| b.contains(*x))
+            let reflectivities: Vec<f64> = band_returns(&scene, b)
+                .into_iter()
+                .map(|(_, x)| x)
                 .collect();
             for bin in &b.survival_bins {
                 if bin.half_survival_range_m.is_none() {
@@ -710,13 +712,9 @@ fn physics_fog_with_a_reflectivity_term_meets_the_truth_of_each_reflectivity() {
             if b.slope.is_none() {
                 continue;
             }
-            let xs: Vec<f64> = scene
-                .iter()
-                .flat_map(|c| {
-                    (0..c.len())
-                        .map(move |i| c.intensity_scale.to_calibrated(c.intensity[i]) as f64)
-                })
-                .filter(|x| b.contains(*x))
+            let xs = band_returns(&scene, b)
+                .into_iter()
+                .map(|(_, x)| x)
                 .collect();
             for (mor, x, err) in term_against_physics(&phys, b, xs, &format!("seed {seed}")) {
                 points += 1;
@@ -730,16 +728,7 @@ fn physics_fog_with_a_reflectivity_term_meets_the_truth_of_each_reflectivity() {
                     ));
                 }
             }
-            let returns: Vec<(f64, f64)> = scene
-                .iter()
-                .flat_map(|c| {
-                    (0..c.len()).map(move |i| {
-                        let r = (c.x[i] as f64).hypot(c.y[i] as f64).hypot(c.z[i] as f64);
-                        (r, c.intensity_scale.to_calibrated(c.intensity[i]) as f64)
-                    })
-                })
-                .filter(|(_, x)| b.contains(*x))
-                .collect();
+            let returns = band_returns(&scene, b);
             for bin in &b.survival_bins {
                 if bin.half_survival_range_m.is_none() {
                     continue;
