@@ -676,6 +676,16 @@ fn fold_intervals(
     )
 }
 
+/// A weather's per-recording trials as the law comparisons read them.
+struct Trials<'a> {
+    /// Per recording.
+    recordings: &'a [RecordingTrials],
+    /// Their binning in `ln u` (the survival histogram's).
+    bin: Binning,
+    /// Where their reflectivity classes sit (with a reflectivity term).
+    deltas: Option<&'a ReflectivityDeltas>,
+}
+
 /// The law that bends ([`crate::bend`]): fits `a·MOR^c` beside the line,
 /// chooses on held-out recordings, writes the chosen law into the bands,
 /// and fills each band's per-MOR-bin 50 % ranges and the line's lack of
@@ -683,28 +693,16 @@ fn fold_intervals(
 fn bend_and_check(
     bands: &mut [SlopeBand],
     line: &SurvivalResult,
-    recs: &[RecordingTrials],
+    trials: &Trials<'_>,
     means: &[(i64, f64)],
     opts: &SurvivalOptions,
     cx: &WeatherContext<'_>,
-    acc: &WeatherAcc,
 ) -> Option<LawChoice> {
     let p = cx.params;
-    // The same offsets the recordings' classes were built with.
-    let classes: Vec<_> = p
-        .bands()
-        .iter()
-        .map(|b| cx.partition.classes_in(b))
-        .collect();
-    let deltas = reflectivity_deltas(acc, cx, &classes);
-    let deltas = deltas.as_ref();
+    let (recs, bin, deltas) = (trials.recordings, trials.bin, trials.deltas);
     if bands.iter().all(|b| b.slope.is_none()) {
         return None;
     }
-    let bin = Binning {
-        step: acc.survival.step(),
-        anchor: acc.survival.anchor(),
-    };
     let seed = |what: &str, extra: &str| {
         murk_types::seed::derive(
             p.seed(),
@@ -1002,14 +1000,13 @@ pub fn weather(
                 None => Vec::new(),
                 Some(d) => classes
                     .iter()
-                    .enumerate()
-                    .map(|(b, cs)| {
+                    .map(|cs| {
                         cs.clone()
+                            .filter(|&c| d.delta[c].is_finite())
                             .filter_map(|c| {
                                 let o = acc.survival.cell_observations(&r.survival, c..c + 1);
                                 (!o.is_empty()).then(|| (d.delta[c], o))
                             })
-                            .filter(|(delta, _)| delta.is_finite() && b < d.ln_reference.len())
                             .collect()
                     })
                     .collect(),
@@ -1175,11 +1172,17 @@ pub fn weather(
         bend_and_check(
             &mut vanishing_slope,
             m,
-            &per_recording,
+            &Trials {
+                recordings: &per_recording,
+                bin: Binning {
+                    step: acc.survival.step(),
+                    anchor: acc.survival.anchor(),
+                },
+                deltas: deltas.as_ref(),
+            },
             &means,
             &opts,
             cx,
-            acc,
         )
     });
     let vanishing_slope_q99: Vec<SlopeBand> = bands

@@ -466,13 +466,16 @@ pub fn fit_reflectivity(
         // in a scene whose dim returns sit near, both move the band's
         // edge alike) turns alone creep along the ridge and stop short
         // of its top, at a point that depends on where they started.
-        let mut before = cost(c, k);
+        // The cost at (c, k) as it stands (each a survival fit).
+        let mut here = cost(c, k);
         for _ in 0..8 {
+            let before = here;
             let c1 = crate::stats::optim::minimize_scalar(&|c| cost(c, k), clo, chi, EXPONENT_TOL)?;
             let k1 =
                 crate::stats::optim::minimize_scalar(&|k| cost(c1, k), klo, khi, EXPONENT_TOL)?;
             let (dc, dk) = (c1 - c, k1 - k);
             (c, k) = (c1, k1);
+            here = cost(c, k);
             let size = dc.abs().max(dk.abs());
             if size < EXPONENT_TOL {
                 break;
@@ -495,17 +498,17 @@ pub fn fit_reflectivity(
                 let along = |t: f64| cost(c + t * dc, k + t * dk);
                 let t =
                     crate::stats::optim::minimize_scalar(&along, 0.0, t_max, EXPONENT_TOL / size)?;
-                if along(t) < cost(c, k) {
+                let there = along(t);
+                if there < here {
                     (c, k) = (c + t * dc, k + t * dk);
+                    here = there;
                 }
             }
             // A turn that gains less than a hundredth of a nat is done:
             // the searches' own precision moves the point by that much.
-            let after = cost(c, k);
-            if before - after < 0.01 {
+            if before - here < 0.01 {
                 break;
             }
-            before = after;
         }
     }
     let fit = eval(c, k)?;
@@ -655,14 +658,25 @@ pub fn predicted_half_crossing(
 ) -> Result<f64, String> {
     let mut m: std::collections::BTreeMap<i64, (f64, f64)> = Default::default();
     for r in recs {
-        for (delta, obs) in r.classes.get(band).into_iter().flatten() {
-            for o in obs {
-                let p = keep(r, *delta, o.u).ok_or("the law has no slope in this band")?;
-                let k = ((o.u.ln() + r.ln_mor_scaled) / RANGE_STEP).floor() as i64;
-                let e = m.entry(k).or_default();
-                e.0 += p * o.total;
-                e.1 += o.total;
-            }
+        // The law's expected survivors in place of the kept ones.
+        let predicted = r
+            .classes
+            .get(band)
+            .into_iter()
+            .flatten()
+            .flat_map(|(delta, obs)| obs.iter().map(move |o| (*delta, o)))
+            .map(|(delta, o)| {
+                let p = keep(r, delta, o.u).ok_or("the law has no slope in this band")?;
+                Ok(Obs {
+                    kept: p * o.total,
+                    ..*o
+                })
+            })
+            .collect::<Result<Vec<Obs>, String>>()?;
+        for (k, kept, total) in by_range(&predicted, r.ln_mor_scaled) {
+            let e = m.entry(k).or_default();
+            e.0 += kept;
+            e.1 += total;
         }
     }
     let rows: Vec<(i64, f64, f64)> = m.into_iter().map(|(k, (a, b))| (k, a, b)).collect();
