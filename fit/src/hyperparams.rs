@@ -64,7 +64,7 @@ fn yes() -> bool {
 /// | `ring_range_m` | [0, 3) | range window of *ring* returns | 0 ≤ lo < hi |
 /// | `ghost_range_m` | [3, 10) | range window of *ghost* returns | ring hi ≤ lo < hi |
 /// | `pairing_tolerance_m` | 0.5 | absolute range tolerance for a degraded return to pair with the clear one | ≥ 0 |
-/// | `pairing_tolerance_rel` | 0.02 | relative range tolerance (the larger of the two applies) | ≥ 0 |
+/// | `pairing_tolerance_rel` | 0.02 | relative range tolerance (the larger of the two applies; a reference cell widens it by how far its firings' ranges wander, at most to twice: see the `reference` module) | ≥ 0 |
 /// | `declared_geometry` | false | pair on campaign.toml's azimuth grid instead of the firing grid measured from the clear recordings (see [`observe`](crate::observe)); disagreements are warned either way | |
 /// | `azimuth_neighbours` | 1 | azimuth bins either side searched when the own cell does not pair | 0–4 |
 /// | `reference_min_presence` | 0.5 | share of clear recordings a cell must return in to enter the reference | (0, 1] |

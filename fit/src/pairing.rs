@@ -1,7 +1,9 @@
 //! Pairing a degraded recording with the clear reference, cell by cell.
 //!
 //! Every degraded return is first offered to its own cell: it pairs with the
-//! clear return when its range is within the pairing tolerance and the cell
+//! clear return when its range is within the cell's tolerance
+//! ([`ClearReference::tolerance`]: the pairing tolerance, widened where the
+//! cell's range wanders between revolutions) and the cell
 //! still has an unpaired clear return (a cell expects as many returns per
 //! scan as the clear scans had, times the recording's scans: a `.pcap` of 600
 //! revolutions expects 600 times what a file of one does). Returns left over are offered to
@@ -129,7 +131,7 @@ fn pair(
             return false;
         }
         let r0 = reference.range(cell);
-        if (range - r0).abs() <= params.pairing_tolerance(r0 as f64) as f32 {
+        if (range - r0).abs() <= reference.tolerance(cell, params) {
             matched[cell] += 1;
             true
         } else {

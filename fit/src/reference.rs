@@ -17,6 +17,18 @@
 //!   others, and the recordings on the minority surface would otherwise
 //!   read as dropouts).
 //!
+//! A return pairs with a reference cell when its range lies within the
+//! cell's *tolerance*: the campaign's pairing tolerance at the cell's range,
+//! widened by how far the cell's range wanders between revolutions — the
+//! reach of its agreeing clear ranges beyond their median, or the ring's
+//! range gradient times how far its firings wander across a cell (half a
+//! cell for a free-running unit, nearly nothing for a phase-locked one,
+//! from the measured phase locking), whichever is larger, and at most the
+//! tolerance again. A free-running unit on a surface seen at a grazing angle
+//! (the road, a wall along the street) reads ranges metres apart across a
+//! cell; without the widening its recordings lost 1–4 % of their returns
+//! there (clear no-change 0.961 with four clear recordings, 0.985 with it).
+//!
 //! Cells that returned in some clear recording but fail either test keep a
 //! range *envelope* `[min, max]`, so that a degraded return inside it is
 //! counted as unpaired scene rather than as a ghost or ring.
@@ -46,6 +58,26 @@ struct RingBins {
     bins: usize,
     width: f64,
     phase: f64,
+    /// How far (in bins, at most ½) the ring's firings wander about the
+    /// cell centres between revolutions; see [`firing_wander`].
+    wander: f64,
+}
+
+/// How far a ring's firings wander about their cell's centre between
+/// revolutions, in cells (0 to ½), from the resultant length `R` of their
+/// phases ([`RingGeometry::phase_locking`](murk_types::RingGeometry)): two
+/// standard deviations of the wrapped normal with that resultant length
+/// (`σ = √(−2 ln R)` radians of the cell's circle), at most half a cell (a
+/// free-running unit, `R ≈ 0`, fires anywhere in the cell). A phase-locked
+/// ring (`R` 0.99) wanders by 0.05 cells; a geometry that was not measured
+/// (`R` 0) is taken to wander, the cautious reading.
+pub fn firing_wander(phase_locking: f64) -> f64 {
+    let r = phase_locking.clamp(0.0, 1.0);
+    if r <= 0.0 {
+        return 0.5;
+    }
+    let sigma = (-2.0 * r.ln()).sqrt() / std::f64::consts::TAU;
+    (2.0 * sigma).min(0.5)
 }
 
 impl CellGrid {
@@ -67,6 +99,7 @@ impl CellGrid {
                 bins,
                 width,
                 phase: r.azimuth_phase_deg.rem_euclid(width),
+                wander: firing_wander(r.phase_locking),
             });
             offset += bins;
         }
@@ -286,6 +319,10 @@ pub struct ClearReference {
     hits: Vec<u16>,
     /// Scans of each clear recording.
     frames: Vec<u64>,
+    /// Per stable cell: how far its agreeing clear ranges (those within the
+    /// pairing tolerance of the median) reach beyond the median, 0
+    /// elsewhere. See [`ClearReference::tolerance`].
+    slack: Vec<f32>,
     /// Envelope of clear ranges of cells that returned at all (NaN otherwise).
     env_lo: Vec<f32>,
     env_hi: Vec<f32>,
@@ -346,6 +383,7 @@ impl ClearReference {
             range: vec![f32::NAN; n_cells],
             reflectivity: vec![f32::NAN; n_cells],
             hits: vec![0; n_cells],
+            slack: vec![0.0; n_cells],
             env_lo: vec![f32::NAN; n_cells],
             env_hi: vec![f32::NAN; n_cells],
             present: Vec::new(),
@@ -366,6 +404,8 @@ impl ClearReference {
             h: vec![0; n_cells],
             hit_sum: vec![0; n_cells],
             median_without: vec![f32::NAN; total],
+            slack_without: vec![0; total],
+            gradient_slack: vec![0.0; n_cells],
         };
         let mut order: Vec<usize> = Vec::new();
         let mut rs: Vec<f32> = Vec::new();
@@ -467,15 +507,51 @@ impl ClearReference {
                     reference.hits[c] = h.min(u16::MAX as u32) as u16;
                     reference.present.push(c as u32);
                 }
+                if stable {
+                    reference.slack[c] = agreeing_slack(&rs, None, med, tol);
+                }
                 loo_cells.stable[c] = stable;
                 loo_cells.median[c] = med;
                 loo_cells.h[c] = h;
                 loo_cells.hit_sum[c] = hit_sum;
                 if m >= 2 {
                     for (pos, &i) in order.iter().enumerate() {
-                        loo_cells.median_without[e_k[i]] = median_without(&rs, pos);
+                        let m_without = median_without(&rs, pos);
+                        loo_cells.median_without[e_k[i]] = m_without;
+                        if stable {
+                            let tol = params.pairing_tolerance(m_without as f64) as f32;
+                            let slack = agreeing_slack(&rs, Some(pos), m_without, tol);
+                            loo_cells.slack_without[e_k[i]] = slack_cm(slack);
+                        }
                     }
                 }
+            }
+        }
+        // The range a cell's firings can read as they wander across it: the
+        // gradient along the ring (from the stable neighbours' medians:
+        // the central difference, or the one side there is) times the
+        // ring's wander, at most the tolerance (at a depth edge the
+        // "gradient" is the jump, and the cap keeps the window within
+        // twice the tolerance there).
+        for ring in &reference.grid.rings.clone() {
+            let at = |p: i64| {
+                let c = ring.offset + p.rem_euclid(ring.bins as i64) as usize;
+                (loo_cells.stable[c] && ring.bins > 2).then_some(loo_cells.median[c])
+            };
+            for p in 0..ring.bins {
+                let c = ring.offset + p;
+                let Some(r) = at(p as i64) else {
+                    continue;
+                };
+                let step = match (at(p as i64 - 1), at(p as i64 + 1)) {
+                    (Some(a), Some(b)) => (b - a).abs() / 2.0,
+                    (Some(a), None) | (None, Some(a)) => (r - a).abs(),
+                    (None, None) => 0.0,
+                };
+                let tol = params.pairing_tolerance(r as f64) as f32;
+                let wander = (ring.wander as f32 * step).min(tol);
+                loo_cells.gradient_slack[c] = wander;
+                reference.slack[c] = reference.slack[c].max(wander);
             }
         }
         if n >= 2 {
@@ -517,6 +593,26 @@ impl ClearReference {
     #[inline]
     pub fn hits(&self, cell: usize) -> u16 {
         self.hits[cell]
+    }
+
+    /// The pairing tolerance of `cell`: the campaign's tolerance at its
+    /// reference range, widened by how far the cell's agreeing clear ranges
+    /// reach beyond their median (its *slack*).
+    ///
+    /// Why the slack: a free-running unit fires at another azimuth inside
+    /// the cell every revolution, and on a surface seen at a grazing angle
+    /// (the road, a wall along the street) the range changes by metres
+    /// across a 1° cell, so a degraded revolution that fires near the
+    /// cell's edge reads a range off the median by more than the tolerance
+    /// and would count as a loss. The clear recordings already show how far
+    /// the cell's range wanders between revolutions; a phase-locked unit's
+    /// cells wander by their range noise only (centimetres), so the slack
+    /// changes nothing there. Bounded by the tolerance itself (only ranges
+    /// that agree with the median count), so the window is at most twice
+    /// the campaign's.
+    #[inline]
+    pub fn tolerance(&self, cell: usize, params: &FitValidParams) -> f32 {
+        params.pairing_tolerance(self.range[cell] as f64) as f32 + self.slack[cell]
     }
 
     /// True when `range` lies within the clear envelope of `cell` widened by
@@ -594,6 +690,37 @@ struct LooCells {
     /// Per entry (a recording's hit of a cell): the cell's median without
     /// that recording, NaN when no other recording hit the cell.
     median_without: Vec<f32>,
+    /// Per entry of a stable cell: the slack of the other recordings'
+    /// agreeing ranges about `median_without`, in whole centimetres rounded
+    /// up (two bytes per entry: this array is as long as all clear images).
+    slack_without: Vec<u16>,
+    /// Per stable cell: the range its firings read as they wander across
+    /// it (the ring's gradient times its wander, at most the tolerance).
+    gradient_slack: Vec<f32>,
+}
+
+/// How far the ranges of sorted `rs` (leaving out position `skip`) that lie
+/// within `tol` of `med` reach beyond it: the largest `|r − med|` among
+/// them, 0 when none does. The agreeing ranges are one run of `rs`, so its
+/// two ends (stepping over `skip`) are all that is read.
+fn agreeing_slack(rs: &[f32], skip: Option<usize>, med: f32, tol: f32) -> f32 {
+    let mut lo = rs.partition_point(|&r| r < med - tol);
+    let mut hi = rs.partition_point(|&r| r <= med + tol);
+    if skip == Some(lo) {
+        lo += 1;
+    }
+    if hi > 0 && skip == Some(hi - 1) {
+        hi -= 1;
+    }
+    if lo >= hi {
+        return 0.0;
+    }
+    (med - rs[lo]).max(rs[hi - 1] - med).max(0.0)
+}
+
+/// A slack in metres as whole centimetres, rounded up (saturating).
+fn slack_cm(slack: f32) -> u16 {
+    (slack * 100.0).ceil().clamp(0.0, u16::MAX as f32) as u16
 }
 
 /// The presence rule: `hits` reach `min_presence` of the `h × frames`
@@ -643,15 +770,17 @@ fn leave_one_out(
             matcher.clear();
             for p in 0..ring.bins {
                 let c = ring.offset + p;
-                let (median, ok) = if !cells.stable[c] {
-                    (f32::NAN, false)
+                let (median, slack, ok) = if !cells.stable[c] {
+                    (f32::NAN, 0.0, false)
                 } else if rec_entry[c] != u32::MAX {
                     let k = rec_entry[c] as usize;
                     let med = cells.median_without[k];
                     let hits_without = (cells.hit_sum[c] - rec_hits[c] as u64) as f64;
                     let ok = med.is_finite()
                         && presence_holds(min_presence, cells.h[c], frames_without, hits_without);
-                    (med, ok)
+                    let slack =
+                        (f32::from(cells.slack_without[k]) / 100.0).max(cells.gradient_slack[c]);
+                    (med, slack, ok)
                 } else {
                     let ok = presence_holds(
                         min_presence,
@@ -659,12 +788,12 @@ fn leave_one_out(
                         frames_without,
                         cells.hit_sum[c] as f64,
                     );
-                    (cells.median[c], ok)
+                    (cells.median[c], reference.slack[c], ok)
                 };
                 matcher.reference.push(if ok {
                     Some(RefCell {
                         range: median,
-                        tol: params.pairing_tolerance(median as f64) as f32,
+                        tol: params.pairing_tolerance(median as f64) as f32 + slack,
                         expected: cells.h[c] as u64 * f,
                     })
                 } else {
@@ -977,6 +1106,78 @@ mod tests {
         // The unstable cell keeps its envelope: 4.5–40.5 m with 0.5 m tolerance.
         assert!(r.in_envelope(2, 30.0, 0.5) && !r.in_envelope(2, 41.0, 0.5));
         assert!(r.in_envelope(1, 7.2, 0.5));
+    }
+
+    #[test]
+    fn firing_wander_follows_the_phase_locking() {
+        assert_eq!(firing_wander(1.0), 0.0);
+        assert_eq!(firing_wander(0.0), 0.5);
+        // R 0.99: σ = √(−2 ln 0.99)/2π = 0.0225 cells, two of them.
+        assert!((firing_wander(0.99) - 0.0450).abs() < 1e-3);
+        let w: Vec<f64> = [0.999, 0.99, 0.9, 0.5, 0.2, 0.01]
+            .iter()
+            .map(|&r| firing_wander(r))
+            .collect();
+        assert!(w.windows(2).all(|p| p[0] < p[1] || p[1] == 0.5), "{w:?}");
+        assert_eq!(firing_wander(0.01), 0.5);
+    }
+
+    #[test]
+    fn the_slack_is_the_reach_of_the_agreeing_ranges() {
+        let rs = [9.0f32, 9.8, 10.0, 10.3, 14.0];
+        assert!((agreeing_slack(&rs, None, 10.0, 0.5) - 0.3).abs() < 1e-6);
+        // Without the 10.3 m entry the reach is the 9.8 m one's.
+        assert!((agreeing_slack(&rs, Some(3), 10.0, 0.5) - 0.2).abs() < 1e-6);
+        assert!((agreeing_slack(&rs, Some(1), 10.0, 0.5) - 0.3).abs() < 1e-6);
+        assert_eq!(agreeing_slack(&rs, None, 12.0, 0.5), 0.0);
+        assert_eq!(agreeing_slack(&[10.0], Some(0), 10.0, 0.5), 0.0);
+        assert_eq!(slack_cm(0.301), 31);
+        assert_eq!(slack_cm(0.0), 0);
+    }
+
+    /// A ring of 36 cells, 12 of them on a surface seen at a grazing angle
+    /// (range 10 + 1.6 m per cell, tolerance 0.5–0.55 m), the rest sky,
+    /// recorded five times, the last
+    /// fired 0.45 cells off the others (0.72 m further). A free-running ring
+    /// (as measured, or unknown) pairs that recording's every cell in the
+    /// leave-one-out, and a degraded revolution fired 0.45 cells off; the
+    /// same recordings from a ring measured as phase-locked lose them.
+    #[test]
+    fn a_free_running_ring_pairs_across_a_range_gradient() {
+        let mut spec = LidarSpec::vlp16();
+        spec.elevation_deg = vec![0.0];
+        spec.azimuth_resolution_deg = 10.0;
+        let p = FitParams::default().check().unwrap();
+        let at = |bin: u32, offset: f32| 10.0 + 1.6 * (bin as f32 + offset);
+        let imgs: Vec<CellImage> = [0.0f32, 0.0, 0.0, 0.0, 0.45]
+            .iter()
+            .map(|&o| img(&(0..12).map(|b| (b, at(b, o), 20.0)).collect::<Vec<_>>()))
+            .collect();
+        let degraded: Vec<CellPoint> = (0..12)
+            .map(|b| CellPoint {
+                cell: b,
+                range: at(b, 0.45),
+                reflectivity: 20.0,
+            })
+            .collect();
+        for (locking, pairs) in [(0.0, true), (0.2, true), (1.0, false)] {
+            let mut g = crate::geometry::declared(&spec);
+            g.rings[0].phase_locking = locking;
+            let r = ClearReference::build(CellGrid::from_geometry(&g), &imgs, &p);
+            assert_eq!(r.present().len(), 12);
+            let loo = r.leave_one_out();
+            assert!(loo[..4].iter().all(|l| l.0 == l.1), "{loo:?}");
+            let t = crate::pairing::pair_recording(&r, &degraded, &p);
+            // The ends of the surface have one neighbour: their gradient is
+            // that side's.
+            if pairs {
+                assert_eq!(loo[4], (12, 12), "R {locking}");
+                assert_eq!(t.kept(), 12, "R {locking}");
+            } else {
+                assert_eq!(loo[4], (0, 12), "R {locking}");
+                assert_eq!(t.kept(), 0, "R {locking}");
+            }
+        }
     }
 
     #[test]
