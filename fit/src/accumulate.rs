@@ -77,6 +77,16 @@ pub struct RecordingRow {
     pub survival_clear: Vec<f64>,
     /// `ln(MOR · range_scale)` the recording's trials were binned with.
     pub ln_mor_scaled: f64,
+    /// Clear returns hidden behind a ghost or ring return (they left the
+    /// trials of `survival`), sparse by histogram index like `survival`:
+    /// `(index, hidden, hidden × clear survival)`. A fit that finds the
+    /// weather's near returns *replace* lost ones ([`crate::occlusion`])
+    /// counts them as lost.
+    pub hidden: Vec<(u32, u32, f64)>,
+    /// The cells at or beyond the far end of the noise windows (every ghost
+    /// and ring return of their ray lies in front of them), by histogram
+    /// index: `(index, hidden, expected)`. What the occlusion test compares.
+    pub beyond_windows: Vec<(u32, u32, u32)>,
 }
 
 /// Resolution of the per-recording occluder histograms, metres.
@@ -102,7 +112,7 @@ impl RecordingRow {
 /// kept)` by index (stable: equal indices keep their cell order, so the
 /// float sums are the same on every run) and sums duplicates.
 #[allow(clippy::type_complexity)]
-fn merge_cells(mut v: Vec<(u32, u32, u32, f64)>) -> (Vec<(u32, u32, u32)>, Vec<f64>) {
+pub(crate) fn merge_cells(mut v: Vec<(u32, u32, u32, f64)>) -> (Vec<(u32, u32, u32)>, Vec<f64>) {
     v.sort_by_key(|c| c.0);
     let mut out: Vec<(u32, u32, u32)> = Vec::with_capacity(v.len());
     let mut clear: Vec<f64> = Vec::with_capacity(v.len());
@@ -311,6 +321,9 @@ impl WeatherAcc {
         }
         let frames = tally.frames.max(1);
         let rays = cells.rays * frames as u64;
+        let reach = params.ghost_range_m()[1].max(params.ring_range_m()[1]).ln();
+        let mut hid: Vec<(u32, u32, u32, f64)> = Vec::new();
+        let mut beyond: Vec<(u32, u32, u32, f64)> = Vec::new();
         for (j, &c) in cells.cells.iter().enumerate() {
             let k = tally.matched[c as usize];
             entry.1[c as usize] += k;
@@ -322,13 +335,16 @@ impl WeatherAcc {
             let b = self.survival.bin_of(cells.ln_r[j] - ln_m);
             self.survival
                 .add(cells.class[j] as usize, b, k as u64, trials as u64);
+            let idx = self.survival.index(cells.class[j] as usize, b) as u32;
             if trials > 0 || k > 0 {
-                own.push((
-                    self.survival.index(cells.class[j] as usize, b) as u32,
-                    k,
-                    trials as u32,
-                    trials as f64 * cells.clear[j],
-                ));
+                own.push((idx, k, trials, trials as f64 * cells.clear[j]));
+            }
+            let hidden_here = h - trials;
+            if hidden_here > 0 {
+                hid.push((idx, hidden_here, 0, hidden_here as f64 * cells.clear[j]));
+            }
+            if cells.ln_r[j] >= reach {
+                beyond.push((idx, hidden_here, h, 0.0));
             }
             kept += k as u64;
             total += h as u64;
@@ -344,6 +360,13 @@ impl WeatherAcc {
             }
         }
         let (survival, survival_clear) = merge_cells(own);
+        let (hidden, hidden_clear) = merge_cells(hid);
+        let hidden = hidden
+            .into_iter()
+            .zip(hidden_clear)
+            .map(|((i, n, _), c)| (i, n, c))
+            .collect();
+        let (beyond_windows, _) = merge_cells(beyond);
         self.rows.push(RecordingRow {
             index,
             id: id.to_string(),
@@ -363,6 +386,8 @@ impl WeatherAcc {
             survival,
             survival_clear,
             ln_mor_scaled: ln_m,
+            hidden,
+            beyond_windows,
         });
     }
 

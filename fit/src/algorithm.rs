@@ -416,6 +416,9 @@ impl FittedTable {
                         .unwrap_or_default()
                 );
             }
+            if let Some(o) = &c.occlusion {
+                let _ = writeln!(s, "    {}", occlusion_line(o));
+            }
             if let Some(r) = &c.mor_from_rain_rate {
                 let _ = writeln!(
                     s,
@@ -444,6 +447,34 @@ impl FittedTable {
         }
         s
     }
+}
+
+/// The summary's line on a weather's occlusion test.
+fn occlusion_line(o: &murk_types::OcclusionTest) -> String {
+    let pct = |x: Option<f64>| x.map_or("–".to_string(), |x| format!("{:.1} %", x * 100.0));
+    if let Some(r) = &o.reason {
+        return format!("near returns: cannot tell whether they replace lost returns — {r}");
+    }
+    let ratio = o
+        .odds_ratio
+        .map_or("unbounded".to_string(), |r| format!("{r:.3}"));
+    format!(
+        "near returns {}: beyond the noise windows {} of the returns the weather loses are hidden, {} of those it keeps (odds ratio {ratio} over {} recordings, p {}){}",
+        if o.replaced {
+            "replace the returns the weather loses"
+        } else {
+            "hide returns whatever their fate"
+        },
+        pct(o.hidden_where_lost),
+        pct(o.hidden_where_kept),
+        o.recordings,
+        o.p_value.map_or("–".to_string(), |p| format!("{p:.2e}")),
+        if o.replaced {
+            "; hidden returns count as lost"
+        } else {
+            ""
+        }
+    )
 }
 
 fn fmt_opt(x: Option<f64>, digits: usize) -> String {

@@ -951,6 +951,19 @@ pub fn weather(
     let sweep = p.sweep_bands();
     let rs = cx.range_scale;
 
+    // Do the weather's near returns replace the returns it loses? Then the
+    // returns they hide are lost ones, and every estimator below counts
+    // them so (see `crate::occlusion`).
+    let reach = p.ghost_range_m()[1].max(p.ring_range_m()[1]);
+    let occlusion = crate::occlusion::test(acc, p.edge_test_alpha(), reach);
+    let replaced_acc;
+    let acc = if occlusion.replaced {
+        replaced_acc = crate::occlusion::with_hidden_as_lost(acc);
+        &replaced_acc
+    } else {
+        acc
+    };
+
     // Survival ML over the table's bands.
     let opts = SurvivalOptions {
         edge: p.edge(),
@@ -1341,6 +1354,7 @@ pub fn weather(
         reflectivity_sweep,
         extensions: Vec::new(),
         law_choice,
+        occlusion: Some(occlusion),
     };
     let diagnostics = WeatherDiagnostics {
         mor: mors,

@@ -140,6 +140,7 @@ mod error;
 mod geometry;
 mod hyperparams;
 pub mod observe;
+mod occlusion;
 mod pairing;
 mod quantile_slope;
 mod radar;

@@ -88,8 +88,9 @@ use crate::{FitError, FitParams, FitValidParams, FittedTable, TOOL};
 /// Version of the state file layout; a state of another format is refused.
 /// Format 2: the parameters gained `compare_laws`; format 3:
 /// `reference_min_agreement` and the recordings' MOR readings; format 4:
-/// `reflectivity_law_edges`.
-pub const STATE_FORMAT: u32 = 4;
+/// `reflectivity_law_edges`; format 5: each recording's hidden returns and
+/// the cells beyond the noise windows (the occlusion test).
+pub const STATE_FORMAT: u32 = 5;
 
 const MAGIC: &[u8; 8] = b"MURKFITS";
 

@@ -163,6 +163,11 @@ impl SurvivalHistogram {
         self.classes
     }
 
+    /// Cells of the histogram (classes × bins): every index is below.
+    pub fn cells(&self) -> usize {
+        self.kept.len()
+    }
+
     /// The flat index of `(class, bin)`, as kept in a recording's sparse
     /// share of the histogram.
     #[inline]

@@ -76,9 +76,9 @@ pub use lidar::LidarSpec;
 pub use table::{
     ClearCoefficients, CoefficientTable, CountLaw, CountLawChoice, CountUnit, EdgeTest,
     ExcludedRecording, Gaussian, InputDigest, Interval, LackOfFit, LawChoice, MorBin, NoiseLaw,
-    Provenance, RadarCoefficients, RainConversion, ReflectivityChoice, ReturnMoments, RingGeometry,
-    SensorGeometry, SlopeBand, SurvivalBin, SurvivalFit, SweepBand, TABLE_FORMAT, TableLidar,
-    Uncertainty, WeatherCoefficients,
+    OcclusionTest, Provenance, RadarCoefficients, RainConversion, ReflectivityChoice,
+    ReturnMoments, RingGeometry, SensorGeometry, SlopeBand, SurvivalBin, SurvivalFit, SweepBand,
+    TABLE_FORMAT, TableLidar, Uncertainty, WeatherCoefficients,
 };
 pub use vanishing::{ReflectivityDependence, VanishingLaw};
 pub use walk::{LeftOut, Walk, WalkedFile, walk_folder};

@@ -204,6 +204,68 @@ pub struct WeatherCoefficients {
     /// tables before it, which use the line).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub law_choice: Option<LawChoice>,
+    /// Whether the weather's near returns *replace* the returns it loses
+    /// (a strongest-return sensor reports the fog's echo where it beats
+    /// the hard target's) or *hide* returns independently of their fate (a
+    /// first-return sensor: a ghost in front hides what is behind). Absent
+    /// in tables before the test.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub occlusion: Option<OcclusionTest>,
+}
+
+/// The test of how a weather's near returns (ghost, ring) relate to the
+/// returns it loses, on the clear returns beyond the noise windows (every
+/// near return of their ray lies in front of them).
+///
+/// If near returns hide clear returns independently of their fate, a
+/// recording's cells that the weather keeps and those it loses are hidden
+/// alike; if they replace lost returns, only the lost ones are. Per
+/// recording, cells whose returns the weather mostly keeps (paired share ≥
+/// 0.8 over the weather) are compared with cells whose returns it mostly
+/// loses (≤ 0.2): the Mantel–Haenszel odds ratio of being hidden, lost
+/// against kept, with recordings as strata, and the Cochran–Mantel–Haenszel
+/// test of ratio 1. When it is significant and at least
+/// [`OcclusionTest::MIN_ODDS_RATIO`], the near returns replace: the
+/// survival trials count a hidden return as lost (it is: the sensor
+/// reported the weather's echo instead), and `murk apply` places near
+/// returns on rays whose return vanished (or that had none), never in
+/// front of a kept one.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct OcclusionTest {
+    /// Recordings with cells of both kinds beyond the noise windows.
+    pub recordings: u32,
+    /// Share of the expected returns hidden, over the cells the weather
+    /// keeps.
+    #[serde(default)]
+    pub hidden_where_kept: Option<f64>,
+    /// Share of the expected returns hidden, over the cells the weather
+    /// loses.
+    #[serde(default)]
+    pub hidden_where_lost: Option<f64>,
+    /// Mantel–Haenszel odds ratio of being hidden, lost cells against kept
+    /// ones (`None` when no kept return is hidden: unbounded).
+    #[serde(default)]
+    pub odds_ratio: Option<f64>,
+    /// Two-sided Cochran–Mantel–Haenszel p-value of ratio 1.
+    #[serde(default)]
+    pub p_value: Option<f64>,
+    /// Significance level of the decision.
+    pub alpha: f64,
+    /// The near returns replace lost returns (the decision).
+    pub replaced: bool,
+    /// Why the test could not tell, when it could not (no recording with
+    /// cells of both kinds beyond the noise windows: the scene is too
+    /// small for its MOR range); the fit then keeps the hiding reading.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
+}
+
+impl OcclusionTest {
+    /// Smallest odds ratio read as replacement: an effect, not only a
+    /// significant one (a fit's own selection moves the ratio of a weather
+    /// whose returns hide independently by tens of per cent, not by a
+    /// factor of two).
+    pub const MIN_ODDS_RATIO: f64 = 2.0;
 }
 
 /// One reflectivity band of a slope list.
@@ -1373,6 +1435,7 @@ mod tests {
             reflectivity_sweep: vec![],
             extensions: vec![],
             law_choice: None,
+            occlusion: None,
         };
         CoefficientTable {
             format: TABLE_FORMAT.into(),

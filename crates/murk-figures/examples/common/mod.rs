@@ -123,6 +123,7 @@ pub fn fog() -> WeatherCoefficients {
             .collect(),
         extensions: vec![],
         law_choice: None,
+        occlusion: None,
     }
 }
 
