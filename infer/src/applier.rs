@@ -12,7 +12,9 @@
 //!    reflectivity × `exp(−2·α·r)` with `α = ln(20)/MOR`.
 //! 4. **Near-range returns** (`near_range`): ghost and ring returns, each
 //!    replacing the return of its ray when closer (seed 004 §4.2 step 3;
-//!    see [`crate::near`]'s rules in the crate docs).
+//!    see [`crate::near`]'s rules in the crate docs) — or, where the table
+//!    found the weather's near returns replace the returns it loses (a
+//!    strongest-return sensor), only on rays without a kept return.
 //!
 //! Kept returns are otherwise untouched: the seed's "no change" class keeps
 //! its range and reflectivity, and the output keeps the input's order,
@@ -46,6 +48,10 @@ pub struct Applier {
     pub(crate) bands: Vec<BandRule>,
     pub(crate) soft: Option<SoftEdge>,
     pub(crate) near_range: bool,
+    /// The table's weather found its near returns replace lost ones
+    /// ([`murk_types::OcclusionTest`]): a near return goes only on a ray
+    /// without a kept return.
+    pub(crate) near_replaces_lost: bool,
     pub(crate) ghost: Option<NearLaw>,
     pub(crate) ring: Option<NearLaw>,
     pub(crate) range_noise_m: f64,
@@ -366,6 +372,7 @@ impl Applier {
             lidar: self.lidar.as_ref(),
             azimuth_resolution_deg: self.azimuth_resolution_deg,
             density: &self.density,
+            replaces_lost: self.near_replaces_lost,
         };
         let (g, r) = add_near_range(
             cloud,

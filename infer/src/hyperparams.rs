@@ -292,6 +292,7 @@ impl ApplyParams {
             bands,
             soft,
             near_range: self.near_range && !identity,
+            near_replaces_lost: coeffs.occlusion.as_ref().is_some_and(|o| o.replaced),
             ghost,
             ring,
             range_noise_m: if identity { 0.0 } else { self.range_noise_m },

@@ -23,7 +23,12 @@
 //!   recording holds many revolutions of the same ray). When the soft target
 //!   is closer, it **replaces** that return: same beam direction, same ring
 //!   and time, the soft target's range and reflectivity. When it is farther,
-//!   the target hides it: it is **occluded** and nothing changes;
+//!   the target hides it: it is **occluded** and nothing changes. Where the
+//!   table's occlusion test found the weather's near returns *replace* the
+//!   returns it loses ([`murk_types::OcclusionTest`]: a strongest-return
+//!   sensor reports the fog's echo only where the hard echo is gone), a
+//!   ray that still has a return keeps it and the soft target is
+//!   **occluded**, whatever its range;
 //! - if the ray has no return (sky, or everything on it vanished), the soft
 //!   target is the only echo: it is **added** on the grid ray, at the ring's
 //!   elevation (from the sensor description, else measured on the scan as
@@ -96,6 +101,10 @@ pub(crate) struct NearSettings<'a> {
     /// Where the returns fall over the rays (the table's point-level count
     /// terms; uniform without them).
     pub density: &'a RayDensity,
+    /// A near return is the weather's echo where the hard one was lost (a
+    /// strongest-return sensor, as the table's occlusion test found): on a
+    /// ray that still has a return it is not reported, whatever its range.
+    pub replaces_lost: bool,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -425,6 +434,11 @@ fn place(
         if cand.is_empty() {
             outcome[e] = Outcome::Added;
             added.push(e);
+            continue;
+        }
+        if s.replaces_lost {
+            // The kept return's echo beats the weather's.
+            outcome[e] = Outcome::Occluded;
             continue;
         }
         let j = cand[((ev.pick * cand.len() as f64) as usize).min(cand.len() - 1)];

@@ -74,6 +74,66 @@ fn closer_soft_targets_replace_the_return_of_their_ray() {
     assert_eq!(changed as u64, g.replaced + r.replaced);
 }
 
+/// A table whose fog near returns *replace* lost returns (its occlusion
+/// test said so: a strongest-return sensor): a kept return's echo beats
+/// the weather's, so a soft target on a ray that still has a return is
+/// occluded whatever its range, and only rays whose return vanished (or
+/// that had none) get one. The same scan and seed without the flag: every
+/// soft target closer than the wall replaces a wall return.
+#[test]
+fn replacing_near_returns_only_fill_rays_without_a_kept_return() {
+    let mut t = seed_table();
+    t.weathers.get_mut(&WeatherClass::Fog).unwrap().occlusion = Some(
+        serde_json::from_value(serde_json::json!({
+            "recordings": 20, "odds_ratio": 40.0, "p_value": 1e-12, "alpha": 0.01, "replaced": true,
+        }))
+        .unwrap(),
+    );
+    let build = |t: &murk_types::CoefficientTable| {
+        ApplyParams::new(WeatherClass::Fog, Severity::Mor(100.0))
+            .near_range(true)
+            .lidar(LidarSpec::vlp16())
+            .seed(3)
+            .build(t)
+            .unwrap()
+    };
+    // A wall at 12 m on the left half of the revolution, nothing on the
+    // right half; at MOR 100 the wall is kept (vanishing distance 34.6 m).
+    let full = wall(12.0);
+    let mut c = PointCloud::with_capacity(full.len());
+    for i in 0..full.len() {
+        if full.y[i] >= 0.0 {
+            c.push(
+                full.x[i],
+                full.y[i],
+                full.z[i],
+                full.intensity[i],
+                full.ring[i],
+            );
+        }
+    }
+    let (out, s) = build(&t).apply(&c, "half wall").unwrap();
+    let g = s.ghost.clone().unwrap();
+    assert_eq!(s.vanished, 0);
+    assert!(g.drawn > 10, "{g:?}");
+    assert_eq!(g.replaced, 0, "{g:?}");
+    assert!(g.added > 0 && g.occluded > 0, "{g:?}");
+    assert_eq!(g.added + g.occluded, g.drawn);
+    // The wall is untouched; what was added lies on the empty half.
+    for i in 0..c.len() {
+        assert_eq!((out.x[i], out.y[i], out.z[i]), (c.x[i], c.y[i], c.z[i]));
+    }
+    let added = c.len()..out.len();
+    assert!(
+        added.clone().all(|i| out.y[i] < 0.05),
+        "added on the wall's side"
+    );
+    assert_eq!(added.len() as u64, g.added + s.ring.clone().unwrap().added);
+    // Hiding (the default): soft targets replace wall returns.
+    let (_, s) = build(&seed_table()).apply(&c, "half wall").unwrap();
+    assert!(s.ghost.unwrap().replaced > 0);
+}
+
 #[test]
 fn farther_soft_targets_are_occluded() {
     // Wall at 0.3 m: closer than any ghost or ring return (≥ 0.5 m).
