@@ -74,8 +74,15 @@ pub type SharedCells = std::sync::Arc<[(u32, u16)]>;
 pub struct Units {
     cells: SharedCells,
     frames: u32,
-    /// Bit `j` set: reference cell `j` is a unit.
+    /// Bit `j` set: reference cell `j` is a unit (or a hidden cell).
     open: Vec<u64>,
+    /// Bit `j` set: reference cell `j`'s clear return was hidden behind a
+    /// nearer weather return; it is a unit only when the weather's near
+    /// returns replace lost ones ([`Units::count_hidden_as_lost`]). Empty
+    /// when no cell was hidden.
+    hidden: Vec<u64>,
+    /// Hidden cells are units (kept as paired, the rest lost).
+    count_hidden: bool,
     kept: KeptCounts,
 }
 
@@ -115,12 +122,32 @@ impl Units {
     /// reference cell `j` (of `cells`) is a unit and, if so, its kept
     /// count.
     pub fn new(cells: SharedCells, frames: u32, unit: impl Fn(usize) -> Option<u32>) -> Units {
+        Units::with_hidden(cells, frames, unit, |_| None)
+    }
+
+    /// [`Units::new`] with the hidden cells: `hidden(j)` is `Some(kept)`
+    /// for a reference cell whose clear return was hidden behind a nearer
+    /// weather return (not a unit until [`Units::count_hidden_as_lost`]).
+    pub fn with_hidden(
+        cells: SharedCells,
+        frames: u32,
+        unit: impl Fn(usize) -> Option<u32>,
+        hidden: impl Fn(usize) -> Option<u32>,
+    ) -> Units {
         let n = cells.len();
         let mut open = vec![0u64; n.div_ceil(64)];
+        let mut hide = Vec::new();
         let mut counts = vec![0u32; n];
         for (j, k) in counts.iter_mut().enumerate() {
             if let Some(kept) = unit(j) {
                 open[j / 64] |= 1 << (j % 64);
+                *k = kept;
+            } else if let Some(kept) = hidden(j) {
+                if hide.is_empty() {
+                    hide = vec![0u64; n.div_ceil(64)];
+                }
+                open[j / 64] |= 1 << (j % 64);
+                hide[j / 64] |= 1 << (j % 64);
                 *k = kept;
             }
         }
@@ -142,7 +169,26 @@ impl Units {
             cells,
             frames,
             open,
+            hidden: hide,
+            count_hidden: false,
             kept,
+        }
+    }
+
+    /// Makes the hidden cells units: the weather's near returns replace
+    /// the returns it loses (the fit's occlusion test,
+    /// [`murk_types::OcclusionTest`]), so a hidden return is a lost one, as
+    /// the fit then counts it.
+    pub fn count_hidden_as_lost(&mut self) {
+        self.count_hidden = true;
+    }
+
+    /// Bit `w` of the units: open, and not hidden unless hidden cells count.
+    #[inline]
+    fn word(&self, w: usize) -> u64 {
+        match self.hidden.get(w) {
+            Some(&h) if !self.count_hidden => self.open[w] & !h,
+            _ => self.open[w],
         }
     }
 
@@ -151,7 +197,7 @@ impl Units {
         self.cells
             .iter()
             .enumerate()
-            .filter(|(j, _)| self.open[j / 64] >> (j % 64) & 1 == 1)
+            .filter(|(j, _)| self.word(j / 64) >> (j % 64) & 1 == 1)
             .map(|(j, &(cell, hits))| Unit {
                 cell,
                 trials: hits as u32 * self.frames,
@@ -161,18 +207,20 @@ impl Units {
 
     /// Number of units.
     pub fn len(&self) -> usize {
-        self.open.iter().map(|w| w.count_ones() as usize).sum()
+        (0..self.open.len())
+            .map(|w| self.word(w).count_ones() as usize)
+            .sum()
     }
 
     /// Whether there is no unit.
     pub fn is_empty(&self) -> bool {
-        self.open.iter().all(|&w| w == 0)
+        (0..self.open.len()).all(|w| self.word(w) == 0)
     }
 
     /// Bytes the recording's units hold on the heap (the shared cells
     /// not counted).
     pub fn heap_bytes(&self) -> usize {
-        8 * self.open.len() + self.kept.bytes()
+        8 * (self.open.len() + self.hidden.len()) + self.kept.bytes()
     }
 }
 
@@ -708,6 +756,16 @@ pub struct Loaded {
 }
 
 impl Loaded {
+    /// Makes every recording's hidden cells survival units
+    /// ([`Units::count_hidden_as_lost`]): the weather's near returns
+    /// replace the returns it loses, as the baseline table's occlusion test
+    /// found.
+    pub fn count_hidden_as_lost(&mut self) {
+        for r in &mut self.recs {
+            r.units.count_hidden_as_lost();
+        }
+    }
+
     /// The first failed read of spilled kept returns, as the diagnosis's
     /// error (see [`SpillFile`]); `Ok` when none failed or nothing spilled.
     pub fn spill_error(&self) -> Result<(), DiagnoseError> {
@@ -1025,10 +1083,18 @@ pub fn load_with(
         for &c in &tally.occluded {
             occluded[c as usize] = true;
         }
-        let units = Units::new(shared.clone(), tally.frames, |j| {
-            let c = shared[j].0 as usize;
-            (!occluded[c]).then(|| tally.matched[c])
-        });
+        let units = Units::with_hidden(
+            shared.clone(),
+            tally.frames,
+            |j| {
+                let c = shared[j].0 as usize;
+                (!occluded[c]).then(|| tally.matched[c])
+            },
+            |j| {
+                let c = shared[j].0 as usize;
+                occluded[c].then(|| tally.matched[c])
+            },
+        );
         let kept = pairs
             .iter()
             .map(|p| {
@@ -1282,6 +1348,41 @@ mod tests {
         // Later reads still work; the first error stays.
         assert_eq!(bits(&kb.get()), gb);
         assert_eq!(file.error().unwrap(), msg);
+    }
+
+    #[test]
+    fn hidden_cells_are_units_only_when_they_count_as_lost() {
+        // 70 cells: every fifth hidden (one of them kept its return), every
+        // seventh lost, the rest kept.
+        let cells: SharedCells = (0..70u32).map(|c| (c * 2, 1u16)).collect::<Vec<_>>().into();
+        let mut u = Units::with_hidden(
+            cells,
+            1,
+            |j| (j % 5 != 0).then_some(u32::from(j % 7 != 0)),
+            |j| (j % 5 == 0).then_some(u32::from(j == 35)),
+        );
+        let visible: Vec<u32> = (0..70u32).filter(|j| j % 5 != 0).map(|j| j * 2).collect();
+        assert_eq!(u.iter().map(|x| x.cell).collect::<Vec<_>>(), visible);
+        assert_eq!(u.len(), 56);
+        u.count_hidden_as_lost();
+        assert_eq!(u.len(), 70);
+        let hidden: Vec<(u32, u32)> = u
+            .iter()
+            .filter(|x| (x.cell / 2) % 5 == 0)
+            .map(|x| (x.cell, x.kept))
+            .collect();
+        assert_eq!(hidden.len(), 14);
+        assert!(
+            hidden.iter().all(|&(c, k)| k == u32::from(c == 70)),
+            "{hidden:?}"
+        );
+        // Without hidden cells nothing changes, and nothing is held for them.
+        let plain = Units::new(
+            (0..3u32).map(|c| (c, 1u16)).collect::<Vec<_>>().into(),
+            1,
+            |_| Some(1),
+        );
+        assert_eq!(plain.heap_bytes(), 8 + 8);
     }
 
     #[test]

@@ -900,7 +900,7 @@ impl DiagnoseValidParams {
             budget_bytes: (p.kept_memory_mb * 1e6) as u64,
             spill_dir: p.spill_dir.clone(),
         };
-        let loaded = data::load_with(campaign, p.weather, &fit_params, &fits, &memory)?;
+        let mut loaded = data::load_with(campaign, p.weather, &fit_params, &fits, &memory)?;
         let n = loaded.recs.len();
         if n < MIN_RECORDINGS {
             return Err(DiagnoseError::Campaign {
@@ -917,9 +917,6 @@ impl DiagnoseValidParams {
             local_box: p.local_box,
             seed: seed_of(p.seed, Purpose::DiagnoseSimulate, &["simulate"]),
         };
-        let mut baseline = self.baseline(&loaded, &folds, &sim, &fit_params)?;
-        let baseline_metrics = Metrics::of(&loaded, &baseline.evals);
-        let evals = std::mem::take(&mut baseline.evals);
         // The table to publish starts from the baseline fitted on every
         // recording (or the table given); without an accepted term it is
         // the baseline itself, so that what follows a diagnosis (`murk
@@ -929,6 +926,20 @@ impl DiagnoseValidParams {
             Some(t) => t.clone(),
             None => self.fit_on(&loaded, &all, &fit_params, "all recordings")?,
         };
+        // Where that table found the weather's near returns replace the
+        // returns it loses, the fit counted hidden returns as lost: the
+        // measured survival counts them so too.
+        if full
+            .weathers
+            .get(&p.weather)
+            .and_then(|w| w.occlusion.as_ref())
+            .is_some_and(|o| o.replaced)
+        {
+            loaded.count_hidden_as_lost();
+        }
+        let mut baseline = self.baseline(&loaded, &folds, &sim, &fit_params)?;
+        let baseline_metrics = Metrics::of(&loaded, &baseline.evals);
+        let evals = std::mem::take(&mut baseline.evals);
         let sw = self.stagewise(&loaded, &folds, &baseline, evals, &sim, &fit_params, full)?;
         let (extended, gain) = match &sw.metrics {
             Some(m) if !sw.steps.is_empty() => {
