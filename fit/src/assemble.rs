@@ -441,6 +441,15 @@ fn table_gaussian(f: &NormalFit, h: &Histogram, lo: f64, hi: f64) -> Gaussian {
     }
 }
 
+/// Share of a recording's rays without a return of the scene (kept,
+/// unpaired scene or far): where a weather return that only replaces lost
+/// returns can show (one return per ray).
+fn row_open_share(row: &RecordingRow) -> f64 {
+    let scene = row.points.saturating_sub(row.ghosts + row.rings);
+    (1.0 - scene as f64 / row.rays.max(1) as f64).clamp(0.0, 1.0)
+}
+
+#[allow(clippy::too_many_arguments)]
 fn noise_law(
     name: &str,
     weather: &str,
@@ -449,12 +458,17 @@ fn noise_law(
     floor: f64,
     counts: &[(&RecordingRow, u64)],
     params: &FitValidParams,
+    replaced: bool,
 ) -> Result<NoiseLaw, String> {
     let n = acc.distance.total();
     if n == 0 {
         return Err(format!("no {name} return was found"));
     }
-    let v = acc.visibility();
+    // Near returns that hide what is behind them are themselves hidden by
+    // nearer returns, more so at shorter distances; near returns that only
+    // replace lost returns show on any ray without a kept one, whatever
+    // their distance (`crate::occlusion`).
+    let v = if replaced { None } else { acc.visibility() };
     let vis = v.as_deref().map(|v| Visibility {
         step: OCCLUDER_STEP_M,
         v,
@@ -497,12 +511,12 @@ fn noise_law(
     let exposed: Vec<(f64, u64, f64)> = counts
         .iter()
         .map(|(row, c)| {
-            (
-                row.mor,
-                *c,
+            let seen = if replaced {
+                row_open_share(row)
+            } else {
                 row_visibility(row, distance_m.mean, distance_m.std, window[0], window[1])
-                    * row.revolutions.max(1) as f64,
-            )
+            };
+            (row.mor, *c, seen * row.revolutions.max(1) as f64)
         })
         .collect();
     let seed = murk_types::seed::derive(
@@ -1305,6 +1319,7 @@ pub fn weather(
         floor,
         &ghost_counts,
         p,
+        occlusion.replaced,
     );
     let ring = noise_law(
         "ring",
@@ -1314,6 +1329,7 @@ pub fn weather(
         floor,
         &ring_counts,
         p,
+        occlusion.replaced,
     );
 
     let (mor_from_rain_rate, mor_from_rain_rate_reason) = match &cx.rain {
