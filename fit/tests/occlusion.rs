@@ -144,11 +144,12 @@ fn nuscenes() -> Option<(murk_types::PointCloud, murk_types::LidarSpec)> {
 /// (+75 %). The fit restores the count as if a replacing return could show
 /// on any ray without a scene return (one minus returns over rays: 7 % at
 /// MOR 70 m), while `murk apply` finds 21 % of its (ring, azimuth) wedges
-/// empty on this scan — its wedges are on the 0.33° grid at phase 0, not
-/// on the scan's own firings, so a fifth hold two returns and a fifth
-/// none — and the physics places echoes only on rays that lost a target
-/// (none on the sky). Placing on the scan's measured firings is the next
-/// step.
+/// empty on this scan — the scan's azimuths are not on one grid (the fit
+/// measures steps of 0.320–0.335° by ring and phase locking 0.04–0.14:
+/// the points are motion-compensated), so a fifth of the 0.33° wedges
+/// hold two returns and a fifth none — and the physics places echoes only
+/// on rays that lost a target (none on the sky). Choosing the rays of the
+/// returns that vanished, rather than empty wedges, is the next step.
 #[test]
 fn a_replacement_table_applied_keeps_what_the_physics_keeps() {
     let Some((cloud, lidar)) = nuscenes() else {
@@ -160,6 +161,7 @@ fn a_replacement_table_applied_keeps_what_the_physics_keeps() {
             .unwrap();
     let t = fit(dir.path());
     assert!(occlusion(&t).replaced);
+
     let mut hiding = t.table().clone();
     hiding
         .weathers

@@ -6,7 +6,9 @@
 //! table's expected count at the MOR; each return draws its range and
 //! calibrated reflectivity from the table's (truncated) Gaussian laws and a
 //! ray: a ring drawn uniformly among the rings the input scan has, and an
-//! azimuth drawn uniformly on the sensor's azimuth grid. With count terms
+//! azimuth drawn uniformly on the sensor's azimuth grid (each ring's grid
+//! shifted onto the scan's own firings where they keep one phase, so that
+//! a wedge holds its firing's return and not half of two). With count terms
 //! along `ring`, `elevation` or `azimuth` (from `murk diagnose`) the rings
 //! and azimuths are drawn in proportion to the terms' values and the
 //! expected counts scale with their means ([`murk_types::RayDensity`]).
@@ -119,7 +121,6 @@ enum Outcome {
 struct Event {
     ghost: bool,
     ring: u16,
-    bin: u64,
     distance: f64,
     reflectivity: f64,
     pick: f64,
@@ -127,6 +128,41 @@ struct Event {
     /// Wedge edges (unit vectors) of the azimuth bin.
     d0: (f32, f32),
     d1: (f32, f32),
+    /// Centre of the wedge, degrees: where an added return goes.
+    azimuth_deg: f64,
+}
+
+/// Per ring (index up to the largest in `rings`), the phase of the scan's
+/// firings on the azimuth grid of `res` degrees: the circular mean of
+/// `azimuth mod res`, so that the wedges a soft target looks for its ray in
+/// are centred on the firings rather than split by them (a scan firing
+/// half a step off the grid would otherwise put two returns in one wedge
+/// and none in the next, and a soft target on the empty one would read the
+/// ray as empty). 0 where the firings show no single phase (resultant
+/// length under ½: a free-running or sparse ring) and where the phase is
+/// within 10⁻⁶ of a step of the grid's (the grid as it was).
+fn ring_phases(input: &PointCloud, rings: &[u16], res: f64) -> Vec<f64> {
+    let n = rings.last().map_or(0, |&r| r as usize + 1);
+    let mut sums = vec![(0.0f64, 0.0f64, 0u64); n];
+    let k = std::f64::consts::TAU / res;
+    for i in 0..input.len() {
+        if let Some(s) = sums.get_mut(input.ring[i] as usize) {
+            let az = (input.y[i] as f64).atan2(input.x[i] as f64).to_degrees();
+            let t = az * k;
+            s.0 += t.cos();
+            s.1 += t.sin();
+            s.2 += 1;
+        }
+    }
+    sums.iter()
+        .map(|&(c, si, m)| {
+            if m == 0 || (c * c + si * si).sqrt() < 0.5 * m as f64 {
+                return 0.0;
+            }
+            let phase = si.atan2(c) / k;
+            if phase.abs() < 1e-6 * res { 0.0 } else { phase }
+        })
+        .collect()
 }
 
 /// The distinct ring ids of `cloud`, ascending.
@@ -251,6 +287,7 @@ pub(crate) fn add_near_range(
         _ => (0.0, 0.0),
     };
 
+    let phase = ring_phases(input, &rings, res);
     let mut events = Vec::with_capacity((n_ghost + n_ring) as usize);
     for (law, n, ghost) in [(s.ghost, n_ghost, true), (s.ring, n_ring, false)] {
         let Some(law) = law else { continue };
@@ -271,18 +308,19 @@ pub(crate) fn add_near_range(
             } else {
                 rings[((ring_u * rings.len() as f64) as usize).min(rings.len() - 1)]
             };
-            let a0 = ((bin as f64 - 0.5) * res).to_radians();
-            let a1 = ((bin as f64 + 0.5) * res).to_radians();
+            let centre = phase.get(ring as usize).copied().unwrap_or(0.0) + bin as f64 * res;
+            let a0 = (centre - 0.5 * res).to_radians();
+            let a1 = (centre + 0.5 * res).to_radians();
             events.push(Event {
                 ghost,
                 ring,
-                bin,
                 distance,
                 reflectivity,
                 pick,
                 time: tmin as f64 + time_u * (tmax as f64 - tmin as f64),
                 d0: (a0.cos() as f32, a0.sin() as f32),
                 d1: (a1.cos() as f32, a1.sin() as f32),
+                azimuth_deg: centre,
             });
         }
     }
@@ -294,7 +332,7 @@ pub(crate) fn add_near_range(
             events.len()
         ));
     } else if !events.is_empty() {
-        place(input, out, s, &events, &mut outcome, res, replaced);
+        place(input, out, s, &events, &mut outcome, replaced);
     }
 
     let tally = |law: Option<&NearLaw>, ghost: bool| {
@@ -358,7 +396,6 @@ fn place(
     s: &NearSettings<'_>,
     events: &[Event],
     outcome: &mut [Outcome],
-    res: f64,
     replaced: &mut Vec<usize>,
 ) {
     // Events by ring.
@@ -464,7 +501,7 @@ fn place(
     for e in added {
         let ev = &events[e];
         let el = elevation[ev.ring as usize];
-        let az = (ev.bin as f64 * res).to_radians();
+        let az = ev.azimuth_deg.to_radians();
         let (x, y, z) = (
             ev.distance * el.cos() * az.cos(),
             ev.distance * el.cos() * az.sin(),

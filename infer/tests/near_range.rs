@@ -74,6 +74,39 @@ fn closer_soft_targets_replace_the_return_of_their_ray() {
     assert_eq!(changed as u64, g.replaced + r.replaced);
 }
 
+/// A wall fired half a step off the grid, with jitter (±0.02 of a step):
+/// on the grid's own wedges half the firings would cross into the next
+/// wedge, leaving wedges empty beside wedges holding two, and a soft
+/// target on an empty wedge would be added in front of a wall that is
+/// there. The wedges follow the scan's firings (their phase measured per
+/// ring), so every soft target finds its wall return.
+#[test]
+fn soft_targets_find_their_ray_when_the_firings_are_off_the_grid() {
+    let spec = LidarSpec::vlp16();
+    let mut c = PointCloud::with_capacity(16 * 1800);
+    for bin in 0..1800 {
+        let jitter = if (bin * 7919) % 3 == 0 { 0.02 } else { -0.02 };
+        let az = ((bin as f64 + 0.5 + jitter) * 0.2).to_radians();
+        for (ring, el) in spec.elevation_deg.iter().enumerate() {
+            let el = el.to_radians();
+            let r = 12.0 / el.cos();
+            c.push(
+                (r * el.cos() * az.cos()) as f32,
+                (r * el.cos() * az.sin()) as f32,
+                (r * el.sin()) as f32,
+                60.0,
+                ring as u16,
+            );
+        }
+    }
+    let (out, s) = near(100.0, 4).apply(&c, "off-grid wall").unwrap();
+    let (g, r) = (s.ghost.unwrap(), s.ring.unwrap());
+    assert!(g.drawn > 10, "{g:?}");
+    assert_eq!(g.added + r.added, 0, "{g:?} {r:?}");
+    assert_eq!(g.replaced + g.occluded, g.drawn);
+    assert_eq!(out.len(), c.len());
+}
+
 /// A table whose fog near returns *replace* lost returns (its occlusion
 /// test said so: a strongest-return sensor): a kept return's echo beats
 /// the weather's, so a soft target on a ray that still has a return is
