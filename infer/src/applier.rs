@@ -343,7 +343,7 @@ impl Applier {
 
         if self.near_range {
             self.add_near(
-                cloud,
+                (cloud, mask),
                 &mut out,
                 (self.ghost.as_ref(), self.ring.as_ref()),
                 (seed, key),
@@ -355,11 +355,12 @@ impl Applier {
         Ok((Some(out), summary))
     }
 
-    /// Adds the ghost and ring returns of `laws` to `out` (rays of `cloud`)
-    /// and records them in `summary`.
+    /// Adds the ghost and ring returns of `laws` to `out` (rays of `cloud`,
+    /// whose points `kept` flags as kept by vanishing) and records them in
+    /// `summary`.
     pub(crate) fn add_near(
         &self,
-        cloud: &PointCloud,
+        (cloud, kept): (&PointCloud, &[u8]),
         out: &mut PointCloud,
         laws: (Option<&NearLaw>, Option<&NearLaw>),
         (seed, key): (ScanSeed, &str),
@@ -373,6 +374,7 @@ impl Applier {
             azimuth_resolution_deg: self.azimuth_resolution_deg,
             density: &self.density,
             replaces_lost: self.near_replaces_lost,
+            kept,
         };
         let (g, r) = add_near_range(
             cloud,

@@ -288,8 +288,13 @@ impl Applier {
                 })
             };
             let (ghost, ring) = (scaled(&self.ghost), scaled(&self.ring));
+            let kept: Vec<u8> = per_chunk
+                .iter()
+                .flatten()
+                .map(|o| u8::from(o.keep))
+                .collect();
             self.add_near(
-                cloud,
+                (cloud, &kept),
                 &mut out,
                 (ghost.as_ref(), ring.as_ref()),
                 (seed, key),

@@ -28,9 +28,11 @@
 //!   the target hides it: it is **occluded** and nothing changes. Where the
 //!   table's occlusion test found the weather's near returns *replace* the
 //!   returns it loses ([`murk_types::OcclusionTest`]: a strongest-return
-//!   sensor reports the fog's echo only where the hard echo is gone), a
-//!   ray that still has a return keeps it and the soft target is
-//!   **occluded**, whatever its range;
+//!   sensor reports the fog's echo only where the hard echo is gone), the
+//!   soft target's ray is instead one of the scan's rays drawn uniformly:
+//!   a kept return's (the soft target is **occluded**, whatever its
+//!   range), a lost return's (it is **added** in front of it, along its
+//!   beam) or the sky's (**added** on a wedge without a return);
 //! - if the ray has no return (sky, or everything on it vanished), the soft
 //!   target is the only echo: it is **added** on the grid ray, at the ring's
 //!   elevation (from the sensor description, else measured on the scan as
@@ -107,6 +109,9 @@ pub(crate) struct NearSettings<'a> {
     /// strongest-return sensor, as the table's occlusion test found): on a
     /// ray that still has a return it is not reported, whatever its range.
     pub replaces_lost: bool,
+    /// Per point of the input scan, 1 when it was kept (vanishing's mask):
+    /// where `replaces_lost` places its soft targets.
+    pub kept: &'a [u8],
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -332,7 +337,17 @@ pub(crate) fn add_near_range(
             events.len()
         ));
     } else if !events.is_empty() {
-        place(input, out, s, &events, &mut outcome, replaced);
+        if s.replaces_lost {
+            let grid = Wedges {
+                rings: &rings,
+                phase: &phase,
+                res,
+                bins,
+            };
+            place_replacing(input, out, s, &events, &mut outcome, &grid);
+        } else {
+            place(input, out, s, &events, &mut outcome, replaced);
+        }
     }
 
     let tally = |law: Option<&NearLaw>, ghost: bool| {
@@ -389,6 +404,155 @@ fn pick_index(cdf: &[f64], u: f64) -> usize {
     cdf.partition_point(|&c| c <= u).min(cdf.len() - 1)
 }
 
+/// The (ring, azimuth) wedges of a scan: its rings, each ring's grid of
+/// `bins` wedges of `res` degrees shifted by its firing phase.
+struct Wedges<'a> {
+    rings: &'a [u16],
+    phase: &'a [f64],
+    res: f64,
+    bins: u64,
+}
+
+impl Wedges<'_> {
+    /// Number of wedges.
+    fn len(&self) -> u64 {
+        self.rings.len() as u64 * self.bins
+    }
+
+    /// The wedge of point `i` of `cloud`, if its ring is one of the scan's.
+    fn of(&self, cloud: &PointCloud, i: usize) -> Option<u64> {
+        let r = self.rings.binary_search(&cloud.ring[i]).ok()?;
+        let az = (cloud.y[i] as f64).atan2(cloud.x[i] as f64).to_degrees();
+        let phase = self
+            .phase
+            .get(cloud.ring[i] as usize)
+            .copied()
+            .unwrap_or(0.0);
+        let b = ((az - phase) / self.res + 0.5).floor() as i64;
+        Some(r as u64 * self.bins + b.rem_euclid(self.bins as i64) as u64)
+    }
+
+    /// `(ring, azimuth in degrees)` of wedge `w`.
+    fn centre(&self, w: u64) -> (u16, f64) {
+        let ring = self.rings[(w / self.bins) as usize];
+        let phase = self.phase.get(ring as usize).copied().unwrap_or(0.0);
+        (ring, phase + (w % self.bins) as f64 * self.res)
+    }
+}
+
+/// Places the events of a weather whose near returns replace the returns
+/// it loses: each event's ray is one of the scan's rays drawn uniformly (its
+/// `pick`) — an input return, or one of the rays without one (as many as
+/// the sensor's wedges exceed the returns: the sky). On a kept return's ray
+/// the event is occluded (the hard echo is the stronger); on a lost
+/// return's ray it is added in front of it, along its direction; on the
+/// sky it is added on a wedge without an input return (the rest of its
+/// `pick` chooses which). So the share of events shown is the share of
+/// rays without a kept return, the open share the fit restored the count
+/// with (`murk_fit`'s occlusion test), however regular the scan's
+/// azimuths are.
+fn place_replacing(
+    input: &PointCloud,
+    out: &mut PointCloud,
+    s: &NearSettings<'_>,
+    events: &[Event],
+    outcome: &mut [Outcome],
+    grid: &Wedges<'_>,
+) {
+    let n = input.len();
+    let rays = (n as u64).max(grid.len()).max(1);
+    let mut full = vec![false; grid.len() as usize];
+    for i in 0..n {
+        if let Some(w) = grid.of(input, i) {
+            full[w as usize] = true;
+        }
+    }
+    let empty: Vec<u64> = (0..grid.len()).filter(|&w| !full[w as usize]).collect();
+    // The ray of an event and, on the sky, its wedge.
+    let ray_of = |ev: &Event| -> (usize, Option<(u16, f64)>) {
+        let x = ev.pick * rays as f64;
+        let ray = (x as u64).min(rays - 1) as usize;
+        if ray < n || empty.is_empty() {
+            return (ray, None);
+        }
+        let k = ((x - ray as f64) * empty.len() as f64) as usize;
+        (ray, Some(grid.centre(empty[k.min(empty.len() - 1)])))
+    };
+    let mut needs = vec![false; grid.rings.last().map_or(0, |&r| r as usize + 1)];
+    for ev in events {
+        if let (_, Some((ring, _))) = ray_of(ev) {
+            needs[ring as usize] = true;
+        }
+    }
+    let elevation = ring_elevations(input, s, &needs);
+    let scale = out.intensity_scale;
+    for (e, ev) in events.iter().enumerate() {
+        let (ray, sky) = ray_of(ev);
+        let it = scale.from_calibrated(ev.reflectivity as f32);
+        let (x, y, z, ring) = if ray < n {
+            if s.kept.get(ray).is_none_or(|&k| k != 0) {
+                outcome[e] = Outcome::Occluded;
+                continue;
+            }
+            let (px, py, pz) = (
+                input.x[ray] as f64,
+                input.y[ray] as f64,
+                input.z[ray] as f64,
+            );
+            let r = (px * px + py * py + pz * pz).sqrt();
+            if !(r > 0.0) {
+                outcome[e] = Outcome::Occluded;
+                continue;
+            }
+            let f = ev.distance / r;
+            (px * f, py * f, pz * f, input.ring[ray])
+        } else if let Some((ring, azimuth_deg)) = sky {
+            let el = elevation.get(ring as usize).copied().unwrap_or(0.0);
+            let az = azimuth_deg.to_radians();
+            (
+                ev.distance * el.cos() * az.cos(),
+                ev.distance * el.cos() * az.sin(),
+                ev.distance * el.sin(),
+                ring,
+            )
+        } else {
+            // No wedge without a return: the sky is full.
+            outcome[e] = Outcome::Occluded;
+            continue;
+        };
+        outcome[e] = Outcome::Added;
+        if out.time.is_some() {
+            let t = if ray < n {
+                input.time.as_ref().map_or(ev.time, |t| t[ray] as f64)
+            } else {
+                ev.time
+            };
+            out.push_timed(x as f32, y as f32, z as f32, it, ring, t as f32);
+        } else {
+            out.push(x as f32, y as f32, z as f32, it, ring);
+        }
+    }
+}
+
+/// Elevation (radians) of every ring up to `needs.len()`: the sensor
+/// description's, else measured on the scan for the rings `needs` flags
+/// (those that get a return added on their own wedge; 0 for the others).
+fn ring_elevations(input: &PointCloud, s: &NearSettings<'_>, needs: &[bool]) -> Vec<f64> {
+    match s.lidar {
+        Some(spec) => (0..needs.len())
+            .map(|r| {
+                spec.elevation_deg
+                    .get(r)
+                    .copied()
+                    .unwrap_or(0.0)
+                    .to_radians()
+            })
+            .collect(),
+        None if needs.iter().any(|&b| b) => measured_elevation(input, needs),
+        None => vec![0.0; needs.len()],
+    }
+}
+
 /// Matches events to the returns of their rays and applies them.
 fn place(
     input: &PointCloud,
@@ -438,30 +602,13 @@ fn place(
     }
 
     // Elevation of the rings that need one (added returns, no description).
-    let needs: Vec<bool> = {
-        let mut v = vec![false; max_ring + 1];
-        if s.lidar.is_none() {
-            for (e, c) in events.iter().zip(&candidates) {
-                if c.is_empty() {
-                    v[e.ring as usize] = true;
-                }
-            }
+    let mut needs = vec![false; max_ring + 1];
+    for (ev, c) in events.iter().zip(&candidates) {
+        if c.is_empty() {
+            needs[ev.ring as usize] = true;
         }
-        v
-    };
-    let elevation: Vec<f64> = match s.lidar {
-        Some(spec) => (0..=max_ring)
-            .map(|r| {
-                spec.elevation_deg
-                    .get(r)
-                    .copied()
-                    .unwrap_or(0.0)
-                    .to_radians()
-            })
-            .collect(),
-        None if needs.iter().any(|&b| b) => measured_elevation(input, &needs),
-        None => vec![0.0; max_ring + 1],
-    };
+    }
+    let elevation = ring_elevations(input, s, &needs);
 
     let scale = out.intensity_scale;
     let mut owner: HashMap<usize, usize> = HashMap::new();

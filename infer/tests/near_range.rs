@@ -165,6 +165,24 @@ fn replacing_near_returns_only_fill_rays_without_a_kept_return() {
     // Hiding (the default): soft targets replace wall returns.
     let (_, s) = build(&seed_table()).apply(&c, "half wall").unwrap();
     assert!(s.ghost.unwrap().replaced > 0);
+    // At MOR 20 the wall (12 m, beyond 0.346·20 = 6.9 m) vanishes: no ray
+    // keeps a return, every soft target is shown — in front of a lost wall
+    // return, along its beam, or on the empty half.
+    let a = ApplyParams::new(WeatherClass::Fog, Severity::Mor(20.0))
+        .near_range(true)
+        .lidar(LidarSpec::vlp16())
+        .seed(3)
+        .build(&t)
+        .unwrap();
+    let (out, s) = a.apply(&c, "half wall").unwrap();
+    let (g, r) = (s.ghost.unwrap(), s.ring.unwrap());
+    assert_eq!(s.vanished, c.len() as u64);
+    assert_eq!((g.occluded + r.occluded, g.replaced), (0, 0), "{g:?}");
+    assert_eq!(out.len() as u64, g.drawn + r.drawn);
+    let on_wall_side = (0..out.len()).filter(|&i| out.y[i] >= 0.0).count();
+    // Half the rays are the wall's: about half the returns go there.
+    let share = on_wall_side as f64 / out.len() as f64;
+    assert!((share - 0.5).abs() < 0.15, "{share}");
 }
 
 #[test]
