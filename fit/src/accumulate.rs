@@ -80,7 +80,7 @@ pub struct RecordingRow {
     /// Clear returns hidden behind a ghost or ring return (they left the
     /// trials of `survival`), sparse by histogram index like `survival`:
     /// `(index, hidden, hidden × clear survival)`. A fit that finds the
-    /// weather's near returns *replace* lost ones ([`crate::occlusion`])
+    /// weather's near returns *replace* lost ones (the occlusion test)
     /// counts them as lost.
     pub hidden: Vec<(u32, u32, f64)>,
     /// The cells at or beyond the far end of the noise windows (every ghost
