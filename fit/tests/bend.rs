@@ -829,31 +829,8 @@ fn a_reflectivity_term_is_not_chosen_where_the_truth_has_none() {
 /// (the scene is ten times the VLP-16 capture's).
 #[test]
 fn physics_fog_on_a_nuscenes_scan_meets_the_truth_of_each_reflectivity() {
-    let Some(path) = murk_types::real_data::real_data_file(
-        env!("CARGO_MANIFEST_DIR"),
-        "nuscenes-lidar-top.pcd.bin",
-    ) else {
+    let Some((cloud, lidar)) = semi_real::nuscenes_scan(env!("CARGO_MANIFEST_DIR")) else {
         return;
-    };
-    let cloud = murk_io::read_cloud(&path, &murk_io::ReadOptions::default()).unwrap();
-    let rings = cloud.ring.iter().copied().max().unwrap() as usize + 1;
-    let mut el = vec![Vec::new(); rings];
-    for i in 0..cloud.len() {
-        let (x, y, z) = (cloud.x[i] as f64, cloud.y[i] as f64, cloud.z[i] as f64);
-        el[cloud.ring[i] as usize].push(z.atan2(x.hypot(y)).to_degrees());
-    }
-    let elevation_deg: Vec<f64> = el
-        .iter_mut()
-        .map(|v| {
-            v.sort_by(f64::total_cmp);
-            v[v.len() / 2]
-        })
-        .collect();
-    let lidar = murk_types::LidarSpec {
-        model: "HDL32E".into(),
-        elevation_deg,
-        azimuth_resolution_deg: 0.33,
-        ..murk_types::LidarSpec::vlp16()
     };
     let cfg = SemiRealConfig {
         mor_m: [10.0, 80.0],

@@ -101,34 +101,10 @@ fn with_and_without_the_echo(
     }
 }
 
-/// The real nuScenes HDL-32E scan and its sensor (ring elevations measured
-/// on the scan), or `None` when the real data are absent.
+/// The real nuScenes HDL-32E scan and its sensor, or `None` when the real
+/// data are absent.
 fn nuscenes() -> Option<(murk_types::PointCloud, murk_types::LidarSpec)> {
-    let path = murk_types::real_data::real_data_file(
-        env!("CARGO_MANIFEST_DIR"),
-        "nuscenes-lidar-top.pcd.bin",
-    )?;
-    let cloud = murk_io::read_cloud(&path, &murk_io::ReadOptions::default()).unwrap();
-    let rings = cloud.ring.iter().copied().max().unwrap() as usize + 1;
-    let mut el = vec![Vec::new(); rings];
-    for i in 0..cloud.len() {
-        let (x, y, z) = (cloud.x[i] as f64, cloud.y[i] as f64, cloud.z[i] as f64);
-        el[cloud.ring[i] as usize].push(z.atan2(x.hypot(y)).to_degrees());
-    }
-    let elevation_deg: Vec<f64> = el
-        .iter_mut()
-        .map(|v| {
-            v.sort_by(f64::total_cmp);
-            v[v.len() / 2]
-        })
-        .collect();
-    let lidar = murk_types::LidarSpec {
-        model: "HDL32E".into(),
-        elevation_deg,
-        azimuth_resolution_deg: 0.33,
-        ..murk_types::LidarSpec::vlp16()
-    };
-    Some((cloud, lidar))
+    semi_real::nuscenes_scan(env!("CARGO_MANIFEST_DIR"))
 }
 
 /// End to end on the nuScenes physics fog with the fog's echo: the table

@@ -12,10 +12,15 @@ use murk_types::{CountLaw, IntensityScale, LidarSpec, PointCloud, WeatherClass};
 /// A cylinder wall at `radius` metres seen by every VLP-16 ring on a 0.2°
 /// grid (one revolution, every ray filled).
 fn wall(radius: f64) -> PointCloud {
+    wall_fired_at(radius, |bin| bin as f64 * 0.2)
+}
+
+/// The same wall with firing `bin` at `azimuth_deg(bin)`.
+fn wall_fired_at(radius: f64, azimuth_deg: impl Fn(usize) -> f64) -> PointCloud {
     let spec = LidarSpec::vlp16();
     let mut c = PointCloud::with_capacity(16 * 1800);
     for bin in 0..1800 {
-        let az = (bin as f64 * 0.2).to_radians();
+        let az = azimuth_deg(bin).to_radians();
         for (ring, el) in spec.elevation_deg.iter().enumerate() {
             let el = el.to_radians();
             let r = radius / el.cos();
@@ -82,23 +87,10 @@ fn closer_soft_targets_replace_the_return_of_their_ray() {
 /// ring), so every soft target finds its wall return.
 #[test]
 fn soft_targets_find_their_ray_when_the_firings_are_off_the_grid() {
-    let spec = LidarSpec::vlp16();
-    let mut c = PointCloud::with_capacity(16 * 1800);
-    for bin in 0..1800 {
+    let c = wall_fired_at(12.0, |bin| {
         let jitter = if (bin * 7919) % 3 == 0 { 0.02 } else { -0.02 };
-        let az = ((bin as f64 + 0.5 + jitter) * 0.2).to_radians();
-        for (ring, el) in spec.elevation_deg.iter().enumerate() {
-            let el = el.to_radians();
-            let r = 12.0 / el.cos();
-            c.push(
-                (r * el.cos() * az.cos()) as f32,
-                (r * el.cos() * az.sin()) as f32,
-                (r * el.sin()) as f32,
-                60.0,
-                ring as u16,
-            );
-        }
-    }
+        (bin as f64 + 0.5 + jitter) * 0.2
+    });
     let (out, s) = near(100.0, 4).apply(&c, "off-grid wall").unwrap();
     let (g, r) = (s.ghost.unwrap(), s.ring.unwrap());
     assert!(g.drawn > 10, "{g:?}");
