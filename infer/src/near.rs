@@ -145,12 +145,22 @@ struct Event {
 /// and none in the next, and a soft target on the empty one would read the
 /// ray as empty). 0 where the firings show no single phase (resultant
 /// length under ½: a free-running or sparse ring) and where the phase is
-/// within 10⁻⁶ of a step of the grid's (the grid as it was).
+/// within 10⁻⁶ of a step of the grid's (the grid as it was). Read on at
+/// most [`PHASE_SAMPLES`] points, spread over the scan by the golden-ratio
+/// sequence (a plain stride could fall in step with the rings' order and
+/// read one ring only): a phase needs few firings, and the pass costs three
+/// trigonometric calls a point.
 fn ring_phases(input: &PointCloud, rings: &[u16], res: f64) -> Vec<f64> {
     let n = rings.last().map_or(0, |&r| r as usize + 1);
     let mut sums = vec![(0.0f64, 0.0f64, 0u64); n];
     let k = std::f64::consts::TAU / res;
-    for i in 0..input.len() {
+    let points = input.len();
+    for j in 0..points.min(PHASE_SAMPLES) {
+        let i = if points <= PHASE_SAMPLES {
+            j
+        } else {
+            ((j as f64 * GOLDEN).fract() * points as f64) as usize
+        };
         if let Some(s) = sums.get_mut(input.ring[i] as usize) {
             let az = (input.y[i] as f64).atan2(input.x[i] as f64).to_degrees();
             let t = az * k;
@@ -169,6 +179,11 @@ fn ring_phases(input: &PointCloud, rings: &[u16], res: f64) -> Vec<f64> {
         })
         .collect()
 }
+
+/// Points a scan's firing phases are read on at most.
+const PHASE_SAMPLES: usize = 4096;
+/// `(√5 − 1)/2`, the step of the sample sequence.
+const GOLDEN: f64 = 0.618_033_988_749_894_9;
 
 /// The distinct ring ids of `cloud`, ascending.
 fn present_rings(cloud: &PointCloud) -> Vec<u16> {
@@ -292,7 +307,11 @@ pub(crate) fn add_near_range(
         _ => (0.0, 0.0),
     };
 
-    let phase = ring_phases(input, &rings, res);
+    let phase = if n_ghost + n_ring > 0 {
+        ring_phases(input, &rings, res)
+    } else {
+        Vec::new()
+    };
     let mut events = Vec::with_capacity((n_ghost + n_ring) as usize);
     for (law, n, ghost) in [(s.ghost, n_ghost, true), (s.ring, n_ring, false)] {
         let Some(law) = law else { continue };
@@ -461,13 +480,19 @@ fn place_replacing(
 ) {
     let n = input.len();
     let rays = (n as u64).max(grid.len()).max(1);
-    let mut full = vec![false; grid.len() as usize];
-    for i in 0..n {
-        if let Some(w) = grid.of(input, i) {
-            full[w as usize] = true;
+    // The wedges without a return, where the sky's events go (needed only
+    // when there is sky: more wedges than returns).
+    let empty: Vec<u64> = if rays > n as u64 {
+        let mut full = vec![false; grid.len() as usize];
+        for i in 0..n {
+            if let Some(w) = grid.of(input, i) {
+                full[w as usize] = true;
+            }
         }
-    }
-    let empty: Vec<u64> = (0..grid.len()).filter(|&w| !full[w as usize]).collect();
+        (0..grid.len()).filter(|&w| !full[w as usize]).collect()
+    } else {
+        Vec::new()
+    };
     // The ray of an event and, on the sky, its wedge.
     let ray_of = |ev: &Event| -> (usize, Option<(u16, f64)>) {
         let x = ev.pick * rays as f64;
