@@ -321,7 +321,7 @@ impl WeatherAcc {
         }
         let frames = tally.frames.max(1);
         let rays = cells.rays * frames as u64;
-        let reach = params.ghost_range_m()[1].max(params.ring_range_m()[1]).ln();
+        let ln_reach = params.noise_reach_m().ln();
         let mut hid: Vec<(u32, u32, u32, f64)> = Vec::new();
         let mut beyond: Vec<(u32, u32, u32, f64)> = Vec::new();
         for (j, &c) in cells.cells.iter().enumerate() {
@@ -343,7 +343,7 @@ impl WeatherAcc {
             if hidden_here > 0 {
                 hid.push((idx, hidden_here, 0, hidden_here as f64 * cells.clear[j]));
             }
-            if cells.ln_r[j] >= reach {
+            if cells.ln_r[j] >= ln_reach {
                 beyond.push((idx, hidden_here, h, 0.0));
             }
             kept += k as u64;
@@ -351,7 +351,7 @@ impl WeatherAcc {
         }
         self.ghost.add(&tally.ghosts, &tally.occluders, rays);
         self.ring.add(&tally.rings, &tally.occluders, rays);
-        let reach = params.ghost_range_m()[1].max(params.ring_range_m()[1]);
+        let reach = params.noise_reach_m();
         let mut occluders = vec![0u32; (reach / ROW_OCCLUDER_STEP_M).ceil().max(1.0) as usize];
         for &r in &tally.occluders {
             let k = (r as f64 / ROW_OCCLUDER_STEP_M).floor().max(0.0) as usize;

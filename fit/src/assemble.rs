@@ -968,8 +968,7 @@ pub fn weather(
     // Do the weather's near returns replace the returns it loses? Then the
     // returns they hide are lost ones, and every estimator below counts
     // them so (see `crate::occlusion`).
-    let reach = p.ghost_range_m()[1].max(p.ring_range_m()[1]);
-    let occlusion = crate::occlusion::test(acc, p.edge_test_alpha(), reach);
+    let occlusion = crate::occlusion::test(acc, p.edge_test_alpha(), p.noise_reach_m());
     let replaced_acc;
     let acc = if occlusion.replaced {
         replaced_acc = crate::occlusion::with_hidden_as_lost(acc);

@@ -478,6 +478,11 @@ impl FitValidParams {
     pub fn ghost_range_m(&self) -> [f64; 2] {
         self.ghost_range_m
     }
+    /// Far end of the noise windows (ghost and ring), metres: a return at
+    /// or beyond it has every near return of its ray in front of it.
+    pub fn noise_reach_m(&self) -> f64 {
+        self.ghost_range_m[1].max(self.ring_range_m[1])
+    }
     /// Pairing tolerance at clear range `r`: the larger of the absolute and
     /// the relative tolerance.
     pub fn pairing_tolerance(&self, r: f64) -> f64 {

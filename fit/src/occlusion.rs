@@ -34,7 +34,7 @@
 //! let occlusion = occlusion::test(acc, p.edge_test_alpha(), reach_m);
 //! let acc = if occlusion.replaced { occlusion::with_hidden_as_lost(acc) } else { acc };
 //! // one recording: 90 of 100 lost cells hidden, 2 of 100 kept ones
-//! cmh(&[(90, 100, 2, 100)])  // odds ratio 441, p < 1e-10
+//! cmh(&[(90, 100, 2, 100)], 0.01)  // odds ratio 441, p < 1e-10
 //! ```
 
 use murk_types::OcclusionTest;
@@ -49,9 +49,10 @@ pub(crate) const LOST_SHARE: f64 = 0.2;
 /// The Mantel–Haenszel summary of `strata` of `(hidden lost, expected
 /// lost, hidden kept, expected kept)`: the odds ratio, the continuity
 /// corrected Cochran–Mantel–Haenszel p-value of ratio 1 (two-sided, one
-/// degree of freedom) and the pooled shares. Strata without both kinds
-/// are skipped; `recordings` counts the others.
-pub(crate) fn cmh(strata: &[(u64, u64, u64, u64)]) -> OcclusionTest {
+/// degree of freedom) and the pooled shares, at level `alpha` (not yet
+/// decided: `replaced` false). Strata without both kinds are skipped;
+/// `recordings` counts the others.
+pub(crate) fn cmh(strata: &[(u64, u64, u64, u64)], alpha: f64) -> OcclusionTest {
     let (mut r, mut s, mut dev, mut var) = (0.0, 0.0, 0.0, 0.0);
     let (mut hl, mut nl, mut hk, mut nk) = (0u64, 0u64, 0u64, 0u64);
     let mut used = 0u32;
@@ -88,7 +89,7 @@ pub(crate) fn cmh(strata: &[(u64, u64, u64, u64)]) -> OcclusionTest {
         // no number, which a JSON table could not hold anyway.
         odds_ratio: (used > 0 && s > 0.0).then(|| r / s),
         p_value,
-        alpha: 0.05,
+        alpha,
         replaced: false,
         reason: None,
     }
@@ -139,8 +140,7 @@ pub(crate) fn test(acc: &WeatherAcc, alpha: f64, reach_m: f64) -> OcclusionTest 
             s
         })
         .collect();
-    let mut t = cmh(&strata);
-    t.alpha = alpha;
+    let mut t = cmh(&strata, alpha);
     if t.recordings == 0 {
         t.reason = Some(format!(
             "no recording has both returns the weather keeps and returns it loses at {reach_m} m or beyond (the noise windows' far end): the scene is too small for its MOR range, so hidden returns leave the survival trials (a first-return reading)"
@@ -191,20 +191,20 @@ mod tests {
     #[test]
     fn hiding_alike_gives_ratio_one_and_replacing_a_large_one() {
         // Two recordings hiding 5 % of kept and lost cells alike.
-        let t = cmh(&[(5, 100, 50, 1000), (10, 200, 20, 400)]);
+        let t = cmh(&[(5, 100, 50, 1000), (10, 200, 20, 400)], 0.01);
         assert!((t.odds_ratio.unwrap() - 1.0).abs() < 1e-9);
         assert!(t.p_value.unwrap() > 0.5);
         assert_eq!(t.recordings, 2);
         // Replacing: lost cells hidden 80 %, kept 1 %.
-        let t = cmh(&[(80, 100, 10, 1000), (150, 200, 4, 400)]);
+        let t = cmh(&[(80, 100, 10, 1000), (150, 200, 4, 400)], 0.01);
         assert!(t.odds_ratio.unwrap() > 100.0, "{t:?}");
         assert!(t.p_value.unwrap() < 1e-12);
         assert!((t.hidden_where_lost.unwrap() - 230.0 / 300.0).abs() < 1e-12);
         // A stratum with one kind only takes no part.
-        let t = cmh(&[(80, 100, 0, 0)]);
+        let t = cmh(&[(80, 100, 0, 0)], 0.01);
         assert_eq!((t.recordings, t.odds_ratio, t.p_value), (0, None, None));
         // No kept return hidden: the ratio is unbounded, not a number.
-        let t = cmh(&[(80, 100, 0, 1000)]);
+        let t = cmh(&[(80, 100, 0, 1000)], 0.01);
         assert_eq!(t.odds_ratio, None);
         assert!(t.p_value.unwrap() < 1e-12 && t.hidden_where_kept == Some(0.0));
     }
@@ -214,7 +214,7 @@ mod tests {
         // One 2×2 table: a = 30 of n1 = 50, c = 10 of n0 = 50.
         // E[a] = 50·40/100 = 20; Var = 50·50·40·60/(100²·99) = 6.0606;
         // χ² = (|30 − 20| − 0.5)²/6.0606 = 14.891; p = erfc(√(χ²/2)).
-        let t = cmh(&[(30, 50, 10, 50)]);
+        let t = cmh(&[(30, 50, 10, 50)], 0.01);
         let chi: f64 = 9.5f64.powi(2) / (50.0 * 50.0 * 40.0 * 60.0 / (1e4 * 99.0));
         assert!((t.p_value.unwrap() - libm::erfc((chi / 2.0).sqrt())).abs() < 1e-15);
         // OR = (30·40)/(10·20) = 6.

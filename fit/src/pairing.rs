@@ -191,7 +191,7 @@ fn pair(
     // included: a weather return is hidden by whatever its ray shows first,
     // a ring or another ghost as much as a wall (at dense weather that
     // crowding hides ~10 % of the ghosts, which the count law must restore).
-    let reach = ghi.max(rhi) as f32;
+    let reach = params.noise_reach_m() as f32;
     t.occluders = points
         .iter()
         .filter(|p| p.range < reach)

@@ -533,7 +533,7 @@ impl ClearReference {
         // ring's wander, at most the tolerance (at a depth edge the
         // "gradient" is the jump, and the cap keeps the window within
         // twice the tolerance there).
-        for ring in &reference.grid.rings.clone() {
+        for ring in &reference.grid.rings {
             let at = |p: i64| {
                 let c = ring.offset + p.rem_euclid(ring.bins as i64) as usize;
                 (loo_cells.stable[c] && ring.bins > 2).then_some(loo_cells.median[c])

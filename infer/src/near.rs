@@ -312,6 +312,12 @@ pub(crate) fn add_near_range(
     } else {
         Vec::new()
     };
+    let grid = Wedges {
+        rings: &rings,
+        phase: &phase,
+        res,
+        bins,
+    };
     let mut events = Vec::with_capacity((n_ghost + n_ring) as usize);
     for (law, n, ghost) in [(s.ghost, n_ghost, true), (s.ring, n_ring, false)] {
         let Some(law) = law else { continue };
@@ -332,7 +338,7 @@ pub(crate) fn add_near_range(
             } else {
                 rings[((ring_u * rings.len() as f64) as usize).min(rings.len() - 1)]
             };
-            let centre = phase.get(ring as usize).copied().unwrap_or(0.0) + bin as f64 * res;
+            let centre = grid.azimuth_deg(ring, bin);
             let a0 = (centre - 0.5 * res).to_radians();
             let a1 = (centre + 0.5 * res).to_radians();
             events.push(Event {
@@ -357,12 +363,6 @@ pub(crate) fn add_near_range(
         ));
     } else if !events.is_empty() {
         if s.replaces_lost {
-            let grid = Wedges {
-                rings: &rings,
-                phase: &phase,
-                res,
-                bins,
-            };
             place_replacing(input, out, s, &events, &mut outcome, &grid);
         } else {
             place(input, out, s, &events, &mut outcome, replaced);
@@ -438,24 +438,28 @@ impl Wedges<'_> {
         self.rings.len() as u64 * self.bins
     }
 
+    /// The firing phase of `ring`, degrees (0 where none was measured).
+    fn phase(&self, ring: u16) -> f64 {
+        self.phase.get(ring as usize).copied().unwrap_or(0.0)
+    }
+
+    /// Centre of wedge `bin` of `ring`, degrees.
+    fn azimuth_deg(&self, ring: u16, bin: u64) -> f64 {
+        self.phase(ring) + bin as f64 * self.res
+    }
+
     /// The wedge of point `i` of `cloud`, if its ring is one of the scan's.
     fn of(&self, cloud: &PointCloud, i: usize) -> Option<u64> {
         let r = self.rings.binary_search(&cloud.ring[i]).ok()?;
         let az = (cloud.y[i] as f64).atan2(cloud.x[i] as f64).to_degrees();
-        let phase = self
-            .phase
-            .get(cloud.ring[i] as usize)
-            .copied()
-            .unwrap_or(0.0);
-        let b = ((az - phase) / self.res + 0.5).floor() as i64;
+        let b = ((az - self.phase(cloud.ring[i])) / self.res + 0.5).floor() as i64;
         Some(r as u64 * self.bins + b.rem_euclid(self.bins as i64) as u64)
     }
 
     /// `(ring, azimuth in degrees)` of wedge `w`.
     fn centre(&self, w: u64) -> (u16, f64) {
         let ring = self.rings[(w / self.bins) as usize];
-        let phase = self.phase.get(ring as usize).copied().unwrap_or(0.0);
-        (ring, phase + (w % self.bins) as f64 * self.res)
+        (ring, self.azimuth_deg(ring, w % self.bins))
     }
 }
 
@@ -533,13 +537,8 @@ fn place_replacing(
             (px * f, py * f, pz * f, input.ring[ray])
         } else if let Some((ring, azimuth_deg)) = sky {
             let el = elevation.get(ring as usize).copied().unwrap_or(0.0);
-            let az = azimuth_deg.to_radians();
-            (
-                ev.distance * el.cos() * az.cos(),
-                ev.distance * el.cos() * az.sin(),
-                ev.distance * el.sin(),
-                ring,
-            )
+            let (x, y, z) = on_ray(ev.distance, el, azimuth_deg);
+            (x, y, z, ring)
         } else {
             // No wedge without a return: the sky is full.
             outcome[e] = Outcome::Occluded;
@@ -557,6 +556,17 @@ fn place_replacing(
             out.push(x as f32, y as f32, z as f32, it, ring);
         }
     }
+}
+
+/// The point `distance` metres out at elevation `el` (radians) and azimuth
+/// `azimuth_deg`.
+fn on_ray(distance: f64, el: f64, azimuth_deg: f64) -> (f64, f64, f64) {
+    let az = azimuth_deg.to_radians();
+    (
+        distance * el.cos() * az.cos(),
+        distance * el.cos() * az.sin(),
+        distance * el.sin(),
+    )
 }
 
 /// Elevation (radians) of every ring up to `needs.len()`: the sensor
@@ -645,11 +655,6 @@ fn place(
             added.push(e);
             continue;
         }
-        if s.replaces_lost {
-            // The kept return's echo beats the weather's.
-            outcome[e] = Outcome::Occluded;
-            continue;
-        }
         let j = cand[((ev.pick * cand.len() as f64) as usize).min(cand.len() - 1)];
         let (px, py, pz) = (out.x[j] as f64, out.y[j] as f64, out.z[j] as f64);
         let r = (px * px + py * py + pz * pz).sqrt();
@@ -673,12 +678,7 @@ fn place(
     for e in added {
         let ev = &events[e];
         let el = elevation[ev.ring as usize];
-        let az = ev.azimuth_deg.to_radians();
-        let (x, y, z) = (
-            ev.distance * el.cos() * az.cos(),
-            ev.distance * el.cos() * az.sin(),
-            ev.distance * el.sin(),
-        );
+        let (x, y, z) = on_ray(ev.distance, el, ev.azimuth_deg);
         let it = scale.from_calibrated(ev.reflectivity as f32);
         if out.time.is_some() {
             out.push_timed(x as f32, y as f32, z as f32, it, ev.ring, ev.time as f32);
