@@ -14,10 +14,10 @@
 //!
 //! - **step**: the mode of the azimuth differences between consecutive returns
 //!   of the ring (file order, which is firing order for every sensor format;
-//!   and, when that gives no clear mode, sorted order within a scan). The
-//!   mode is found on a logarithmic histogram (1 % bins), then refined as the
-//!   median of the differences within ±5 % of it; missing returns only add
-//!   multiples of the step, which the mode ignores. The number of cells per
+//!   and, when that gives no clear mode, sorted order within a scan), by
+//!   [`murk_types::firing::mode_step`] (the estimator murk-infer measures
+//!   each scan's firings with); missing returns only add multiples of the
+//!   step, which the mode ignores. The number of cells per
 //!   revolution is `round(360 / step)` and the cell width `360 / cells`.
 //! - **phase**: the circular mean of `azimuth mod width`; its resultant length
 //!   says whether the sensor is phase-locked (≈ 1) or free-running (≈ 0; any
@@ -30,6 +30,8 @@
 //! both values; the fit pairs on the measured grid (the readings are the
 //! evidence) unless asked to use the declared one.
 
+pub use murk_types::firing::{MIN_DIFFS, azimuth_deg};
+use murk_types::firing::{MIN_STEP_DEG, circ_diff, median, mode_step};
 use murk_types::{LidarSpec, PointCloud, RingGeometry, SensorGeometry};
 
 /// Clear recordings the geometry is measured from (the first, in campaign
@@ -37,25 +39,12 @@ use murk_types::{LidarSpec, PointCloud, RingGeometry, SensorGeometry};
 pub const MAX_RECORDINGS: usize = 8;
 /// Scans read per recording at most (revolutions of a `.pcap`).
 pub const MAX_FRAMES_PER_RECORDING: usize = 20;
-/// Differences a ring needs for its own step.
-pub const MIN_DIFFS: usize = 20;
 /// Relative disagreement of the azimuth step that is warned.
 pub const STEP_TOLERANCE: f64 = 0.02;
 /// Disagreement of a ring elevation that is warned, degrees.
 pub const ELEVATION_TOLERANCE_DEG: f64 = 0.5;
 /// Samples kept per ring and kind (differences, azimuths, elevations).
 const MAX_SAMPLES: usize = 200_000;
-/// Smallest difference considered a step, degrees (below: duplicate or
-/// second return of the same firing).
-const MIN_STEP_DEG: f64 = 1e-3;
-/// Largest step considered, degrees.
-const MAX_STEP_DEG: f64 = 90.0;
-/// Relative width of the histogram bins of the mode search.
-const LOG_BIN: f64 = 0.01;
-/// Relative half-width of the window the mode is refined in.
-const REFINE: f64 = 0.05;
-/// Share of the differences the mode must hold to be trusted.
-const MIN_MODE_SHARE: f64 = 0.2;
 
 #[derive(Debug, Clone, Default)]
 struct RingSamples {
@@ -78,19 +67,6 @@ pub struct GeometryAcc {
     rings: Vec<RingSamples>,
     frames: u32,
     recordings: u32,
-}
-
-/// Azimuth of `(x, y)`, degrees in `[0, 360)`.
-#[inline]
-pub fn azimuth_deg(x: f32, y: f32) -> f64 {
-    let a = (y as f64).atan2(x as f64).to_degrees();
-    if a < 0.0 { a + 360.0 } else { a }
-}
-
-/// `|a − b|` on the circle, degrees in `[0, 180]`.
-fn circ_diff(a: f64, b: f64) -> f64 {
-    let d = (a - b).abs() % 360.0;
-    if d > 180.0 { 360.0 - d } else { d }
 }
 
 impl GeometryAcc {
@@ -256,93 +232,6 @@ impl GeometryAcc {
             declared_azimuth_step_deg: declared.azimuth_resolution_deg,
             rings,
         }
-    }
-}
-
-/// The mode of `diffs` (degrees) and the share of differences within ±5 %
-/// of it, or `None` when there are too few or no clear mode.
-fn mode_step(diffs: &[f32]) -> Option<(f64, f64)> {
-    if diffs.len() < MIN_DIFFS {
-        return None;
-    }
-    let lo = MIN_STEP_DEG.ln();
-    let n_bins = ((MAX_STEP_DEG.ln() - lo) / LOG_BIN).ceil() as usize + 1;
-    let mut hist = vec![0u32; n_bins];
-    for &d in diffs {
-        let d = d as f64;
-        if !(MIN_STEP_DEG..=MAX_STEP_DEG).contains(&d) {
-            continue;
-        }
-        let k = ((d.ln() - lo) / LOG_BIN) as usize;
-        hist[k.min(n_bins - 1)] += 1;
-    }
-    // Smoothed over ±2 bins (jitter spreads a step over a few percent);
-    // ties go to the smaller step (a gap is a multiple, never a fraction).
-    let smooth = |k: usize| -> u32 { hist[k.saturating_sub(2)..(k + 3).min(n_bins)].iter().sum() };
-    let mut best = (0u32, 0usize);
-    for k in 0..n_bins {
-        let v = smooth(k);
-        if v > best.0 {
-            best = (v, k);
-        }
-    }
-    if best.0 == 0 {
-        return None;
-    }
-    let centre = (lo + (best.1 as f64 + 0.5) * LOG_BIN).exp();
-    let near: Vec<f32> = diffs
-        .iter()
-        .copied()
-        .filter(|&d| (d as f64 - centre).abs() <= REFINE * centre)
-        .collect();
-    if near.is_empty() {
-        return None;
-    }
-    let mut step = median(&near);
-    // Re-centre the window on the estimate (the histogram bin is 1 % wide).
-    for _ in 0..3 {
-        let near: Vec<f32> = diffs
-            .iter()
-            .copied()
-            .filter(|&d| (d as f64 - step).abs() <= REFINE * step)
-            .collect();
-        if near.is_empty() {
-            return None;
-        }
-        step = median(&near);
-    }
-    // The cell count needs the step to better than 1 / (2 · cells): a
-    // difference is `m` steps plus the jitter of its two ends, so over all
-    // differences of up to 50 steps Σd / Σm telescopes the jitter away.
-    for _ in 0..2 {
-        let (mut sd, mut sm) = (0.0f64, 0.0f64);
-        for &d in diffs {
-            let m = (d as f64 / step).round();
-            if (1.0..=50.0).contains(&m) && (d as f64 - m * step).abs() <= 0.3 * step {
-                sd += d as f64;
-                sm += m;
-            }
-        }
-        if sm > 0.0 {
-            step = sd / sm;
-        }
-    }
-    let share = diffs
-        .iter()
-        .filter(|&&d| (d as f64 - step).abs() <= REFINE * step)
-        .count() as f64
-        / diffs.len() as f64;
-    (share >= MIN_MODE_SHARE).then_some((step, share))
-}
-
-fn median(v: &[f32]) -> f64 {
-    let mut w = v.to_vec();
-    w.sort_by(f32::total_cmp);
-    let n = w.len();
-    if n % 2 == 1 {
-        w[n / 2] as f64
-    } else {
-        0.5 * (w[n / 2 - 1] as f64 + w[n / 2] as f64)
     }
 }
 

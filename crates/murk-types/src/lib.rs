@@ -19,6 +19,8 @@
 //!   logistic), fitted by `fit`, applied by `infer`.
 //! - [`VanishingLaw`]: the vanishing-distance law (the seed's line or a
 //!   power of MOR that bends), fitted by `fit`, applied by `infer`.
+//! - [`firing`]: the firing step of a spinning LiDAR measured from its
+//!   returns, for fit's sensor geometry and infer's near-range rays.
 //! - [`seed`]: the one seed derivation, `(seed, item key, purpose)`, of
 //!   every randomised step.
 //! - [`CoefficientTable`]: the fitted weather-noise coefficients
@@ -47,6 +49,7 @@ mod cloud;
 mod edge;
 mod error;
 mod extension;
+pub mod firing;
 mod format;
 mod intensity;
 mod lidar;
