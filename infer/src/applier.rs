@@ -58,6 +58,9 @@ pub struct Applier {
     pub(crate) attenuation_alpha: Option<f64>,
     pub(crate) lidar: Option<LidarSpec>,
     pub(crate) azimuth_resolution_deg: f64,
+    /// Near-range rays on each scan's measured firing step (no explicit
+    /// `azimuth_resolution_deg`).
+    pub(crate) measure_azimuth_step: bool,
     pub(crate) seed: u64,
     pub(crate) warnings: Vec<String>,
     pub(crate) extensions: Vec<murk_types::ModelExtension>,
@@ -372,6 +375,7 @@ impl Applier {
             ring: laws.1,
             lidar: self.lidar.as_ref(),
             azimuth_resolution_deg: self.azimuth_resolution_deg,
+            measure_azimuth_step: self.measure_azimuth_step,
             density: &self.density,
             replaces_lost: self.near_replaces_lost,
             kept,

@@ -102,6 +102,9 @@ pub(crate) struct NearSettings<'a> {
     pub ring: Option<&'a NearLaw>,
     pub lidar: Option<&'a LidarSpec>,
     pub azimuth_resolution_deg: f64,
+    /// Measure each scan's firing step ([`scan_step`]) and use
+    /// `azimuth_resolution_deg` only where the scan shows none.
+    pub measure_azimuth_step: bool,
     /// Where the returns fall over the rays (the table's point-level count
     /// terms; uniform without them).
     pub density: &'a RayDensity,
@@ -180,6 +183,46 @@ fn ring_phases(input: &PointCloud, rings: &[u16], res: f64) -> Vec<f64> {
         .collect()
 }
 
+/// The firing step of a scan, degrees dividing the turn: the step of the
+/// azimuth differences between consecutive returns of each ring (file
+/// order, which is firing order) over its first [`STEP_POINTS`] points, by
+/// the estimator that measures the fit's clear recordings
+/// ([`murk_types::firing::mode_step`]). `None` where they show no clear
+/// step (a shuffled or sparse file) or one beyond 45°: the given grid
+/// stays. A unit's firings are not always its datasheet's (a VLP-16 at
+/// 600 rpm fires every 0.398°, not 0.4°): the wedges are the sky rays a
+/// replacing weather's returns show on, so their number must be the
+/// scan's.
+fn scan_step(input: &PointCloud) -> Option<f64> {
+    use murk_types::firing::{MIN_STEP_DEG, azimuth_deg, circ_diff, firings_per_turn, mode_step};
+    let m = input.len().min(STEP_POINTS);
+    let mut last: Vec<f64> = Vec::new();
+    let mut diffs = Vec::with_capacity(m);
+    for i in 0..m {
+        let (x, y) = (input.x[i], input.y[i]);
+        if !(x.is_finite() && y.is_finite()) || (x == 0.0 && y == 0.0) {
+            continue;
+        }
+        let r = input.ring[i] as usize;
+        if r >= last.len() {
+            last.resize(r + 1, f64::NAN);
+        }
+        let az = azimuth_deg(x, y);
+        if last[r].is_finite() {
+            let d = circ_diff(az, last[r]);
+            if d >= MIN_STEP_DEG {
+                diffs.push(d as f32);
+            }
+        }
+        last[r] = az;
+    }
+    let (step, _) = mode_step(&diffs)?;
+    (step <= 45.0).then(|| firings_per_turn(step).1)
+}
+
+/// Points a scan's firing step is read on at most.
+const STEP_POINTS: usize = 16_384;
+
 /// Points a scan's firing phases are read on at most.
 const PHASE_SAMPLES: usize = 4096;
 /// `(√5 − 1)/2`, the step of the sample sequence.
@@ -251,7 +294,11 @@ pub(crate) fn add_near_range(
         }
     }
 
-    let res = s.azimuth_resolution_deg;
+    let res = s
+        .measure_azimuth_step
+        .then(|| scan_step(input))
+        .flatten()
+        .unwrap_or(s.azimuth_resolution_deg);
     let bins = ((360.0 / res).round() as u64).max(1);
     // Point-level count terms: cumulative weights of the rings and azimuth
     // bins, and the factor on the expected counts.

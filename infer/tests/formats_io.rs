@@ -233,8 +233,11 @@ fn new_near_range_points_get_empty_extra_cells() {
     std::fs::write(&input, &text).unwrap();
     // Far half of the sky is empty (every third azimuth bin only), so some
     // soft targets are added on empty rays and others replace wall returns.
+    // The sensor fires every 0.2° (what the scan alone would read as a
+    // 0.6° step).
     let a = ApplyParams::new(WeatherClass::Fog, Severity::Mor(100.0))
         .near_range(true)
+        .azimuth_resolution_deg(0.2)
         .near_range_count_scale(3.0)
         .seed(11)
         .build(&seed_table())
