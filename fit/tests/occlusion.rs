@@ -121,10 +121,11 @@ fn nuscenes() -> Option<(murk_types::PointCloud, murk_types::LidarSpec)> {
 /// loses kept returns the physics keeps.
 ///
 /// Measured (seed 1, 40 fog recordings, MOR 11–78 m): kept 1,088,871
-/// against the physics' 1,072,457 (+1.5 %), read as hiding 685,803
-/// (−36.1 %); fog returns 294,553 against 308,086 (−4.4 %; −1.9 % when the
+/// against the physics' 1,072,457 (+1.5 %), read as hiding 688,530
+/// (−35.8 %); fog returns 294,553 against 308,086 (−4.4 %; −1.9 % when the
 /// wedges were the declared 0.33°, whose 34,912 rays left 224 "sky" rays
-/// this scan does not have: it stores all 1,084 firings of each ring). (With near
+/// this scan does not have: it stores all 1,084 firings of each ring, the
+/// ones without a return as points near the origin). (With near
 /// returns placed on empty (ring, azimuth) wedges instead of on the rays
 /// of lost returns, +75 %: this scan's azimuths are motion-compensated,
 /// not on one grid — the fit measures steps of 0.320–0.335° by ring and

@@ -54,7 +54,7 @@ pub enum Severity {
 /// | `clamp_rain_rate` | off | clamp a rain rate outside the conversion's validity into it (with a warning) instead of failing | — |
 /// | `clear_mor_threshold_m` | [`DEFAULT_CLEAR_MOR_M`] | MOR at and above which applying is the identity | > 0 |
 /// | `lidar` | none | sensor description for near-range rays (ring elevations, azimuth grid); none: ring elevations are measured on each scan | a valid [`LidarSpec`] |
-/// | `azimuth_resolution_deg` | each scan's own firing step (measured on its first 16,384 points by [`murk_types::firing::mode_step`]), where it shows none `lidar`'s, else [`DEFAULT_AZIMUTH_RESOLUTION_DEG`]; set, it is used as given | azimuth grid of near-range rays | (0, 45] |
+/// | `azimuth_resolution_deg` | `lidar`'s, else [`DEFAULT_AZIMUTH_RESOLUTION_DEG`] | azimuth grid of near-range rays; unless set, a replacing weather (the table's occlusion test) counts the sky's rays on each scan's own firing step, measured on its first 16,384 points by [`murk_types::firing::mode_step`] | (0, 45] |
 /// | `seed` | 0 | master seed of every random draw | any |
 ///
 /// ```
