@@ -85,18 +85,10 @@ pub fn mode_step(diffs: &[f32]) -> Option<(f64, f64)> {
     if best.0 == 0 {
         return None;
     }
-    let centre = (lo + (best.1 as f64 + 0.5) * LOG_BIN).exp();
-    let near: Vec<f32> = diffs
-        .iter()
-        .copied()
-        .filter(|&d| (d as f64 - centre).abs() <= REFINE * centre)
-        .collect();
-    if near.is_empty() {
-        return None;
-    }
-    let mut step = median(&near);
-    // Re-centre the window on the estimate (the histogram bin is 1 % wide).
-    for _ in 0..3 {
+    // The median within ±5 % of the histogram's bin, then re-centred on
+    // the estimate three times (the bin is 1 % wide).
+    let mut step = (lo + (best.1 as f64 + 0.5) * LOG_BIN).exp();
+    for _ in 0..4 {
         let near: Vec<f32> = diffs
             .iter()
             .copied()
