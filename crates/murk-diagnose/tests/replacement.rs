@@ -18,42 +18,28 @@
 //! interleaved so that they do not follow time). Skipped, saying so,
 //! without the capture.
 
-use murk_campaign::Campaign;
-use murk_diagnose::DiagnoseParams;
+mod common;
+
 use murk_fixtures::physics_fog::PhysicsFog;
-use murk_fixtures::semi_real::{SemiRealConfig, vlp16_campaign, vlp16_capture};
+use murk_fixtures::semi_real::vlp16_capture;
 use murk_types::{ExtensionObservable, WeatherClass};
 
 #[test]
 fn a_replacing_fog_leaves_no_survival_profile_along_range_or_mor() {
-    let Some(capture) = vlp16_capture(env!("CARGO_MANIFEST_DIR")) else {
+    if vlp16_capture(env!("CARGO_MANIFEST_DIR")).is_none() {
         eprintln!("skipped: the real VLP-16 capture is not present");
         return;
-    };
-    let seed = 61;
-    let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("physics");
-    let cfg = SemiRealConfig {
-        clear: 10,
-        degraded: 36,
-        mor_m: [8.0, 40.0],
-        declared_azimuth_deg: 0.4,
-        interleave_revolutions: true,
-        physics: Some(PhysicsFog {
+    }
+    let d = common::semi_real_fog(61, |c| {
+        c.degraded = 36;
+        c.mor_m = [8.0, 40.0];
+        c.interleave_revolutions = true;
+        c.physics = Some(PhysicsFog {
             fog_returns: true,
             sky_returns: true,
             ..PhysicsFog::default()
-        }),
-        ..SemiRealConfig::default()
-    };
-    vlp16_campaign(&capture, &out, &cfg, seed).unwrap();
-    let campaign = Campaign::open(&out).unwrap();
-    let d = DiagnoseParams::new(WeatherClass::Fog)
-        .seed(seed)
-        .check()
-        .unwrap()
-        .run(&campaign)
-        .unwrap();
+        });
+    });
     let r = &d.report;
     let table = d.extended_table.as_ref().expect("the table");
     let occlusion = table.weathers[&WeatherClass::Fog]
