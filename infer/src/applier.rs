@@ -58,8 +58,8 @@ pub struct Applier {
     pub(crate) attenuation_alpha: Option<f64>,
     pub(crate) lidar: Option<LidarSpec>,
     pub(crate) azimuth_resolution_deg: f64,
-    /// Near-range rays on each scan's measured firing step (no explicit
-    /// `azimuth_resolution_deg`).
+    /// A replacing weather counts the sky on each scan's measured firing
+    /// step (no explicit `azimuth_resolution_deg`).
     pub(crate) measure_azimuth_step: bool,
     pub(crate) seed: u64,
     pub(crate) warnings: Vec<String>,

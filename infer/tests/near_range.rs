@@ -177,6 +177,62 @@ fn replacing_near_returns_only_fill_rays_without_a_kept_return() {
     assert!((share - 0.5).abs() < 0.15, "{share}");
 }
 
+/// A replacing weather's returns show on the rays without a kept return,
+/// the sky among them, so the sky must be counted on the scan's own
+/// firings: a half wall from a unit firing every 0.25° (1,440 firings a
+/// turn), described as the VLP-16's 0.2°. On the measured step half the
+/// rays are open and about half the drawn returns show; on the declared
+/// grid (given explicitly) 28,800 wedges hold 11,520 returns and three
+/// in five would.
+#[test]
+fn the_sky_of_a_replacing_weather_is_counted_on_the_scan_s_firings() {
+    let mut t = seed_table();
+    t.weathers.get_mut(&WeatherClass::Fog).unwrap().occlusion = Some(
+        serde_json::from_value(serde_json::json!({
+            "recordings": 20, "odds_ratio": 40.0, "p_value": 1e-12, "alpha": 0.01, "replaced": true,
+        }))
+        .unwrap(),
+    );
+    let spec = LidarSpec::vlp16();
+    let mut c = PointCloud::with_capacity(16 * 720);
+    for bin in 0..1440 {
+        let az = (0.25 * bin as f64).to_radians();
+        if az.sin() < 0.0 {
+            continue;
+        }
+        for (ring, el) in spec.elevation_deg.iter().enumerate() {
+            let el = el.to_radians();
+            let r = 12.0 / el.cos();
+            c.push(
+                (r * el.cos() * az.cos()) as f32,
+                (r * el.cos() * az.sin()) as f32,
+                (r * el.sin()) as f32,
+                60.0,
+                ring as u16,
+            );
+        }
+    }
+    let shown = |explicit: Option<f64>| {
+        let mut p = ApplyParams::new(WeatherClass::Fog, Severity::Mor(100.0))
+            .near_range(true)
+            .near_range_count_scale(20.0)
+            .lidar(spec.clone())
+            .seed(5);
+        if let Some(res) = explicit {
+            p = p.azimuth_resolution_deg(res);
+        }
+        let (_, s) = p.build(&t).unwrap().apply(&c, "half wall").unwrap();
+        assert_eq!(s.vanished, 0);
+        let (g, r) = (s.ghost.unwrap(), s.ring.unwrap());
+        assert!(g.drawn + r.drawn > 300, "{g:?} {r:?}");
+        (g.added + r.added) as f64 / (g.drawn + r.drawn) as f64
+    };
+    let (measured, declared) = (shown(None), shown(Some(0.2)));
+    eprintln!("shown: {measured:.3} on the measured step, {declared:.3} on the declared grid");
+    assert!((measured - 0.5).abs() < 0.05, "{measured}");
+    assert!((declared - 0.6).abs() < 0.05, "{declared}");
+}
+
 #[test]
 fn farther_soft_targets_are_occluded() {
     // Wall at 0.3 m: closer than any ghost or ring return (≥ 0.5 m).
