@@ -17,9 +17,14 @@ fn wall(radius: f64) -> PointCloud {
 
 /// The same wall with firing `bin` at `azimuth_deg(bin)`.
 fn wall_fired_at(radius: f64, azimuth_deg: impl Fn(usize) -> f64) -> PointCloud {
+    wall_of(radius, 1800, azimuth_deg)
+}
+
+/// The wall from a unit firing `firings` times a turn.
+fn wall_of(radius: f64, firings: usize, azimuth_deg: impl Fn(usize) -> f64) -> PointCloud {
     let spec = LidarSpec::vlp16();
-    let mut c = PointCloud::with_capacity(16 * 1800);
-    for bin in 0..1800 {
+    let mut c = PointCloud::with_capacity(16 * firings);
+    for bin in 0..firings {
         let az = azimuth_deg(bin).to_radians();
         for (ring, el) in spec.elevation_deg.iter().enumerate() {
             let el = el.to_radians();
@@ -99,14 +104,9 @@ fn soft_targets_find_their_ray_when_the_firings_are_off_the_grid() {
     assert_eq!(out.len(), c.len());
 }
 
-/// A table whose fog near returns *replace* lost returns (its occlusion
-/// test said so: a strongest-return sensor): a kept return's echo beats
-/// the weather's, so a soft target on a ray that still has a return is
-/// occluded whatever its range, and only rays whose return vanished (or
-/// that had none) get one. The same scan and seed without the flag: every
-/// soft target closer than the wall replaces a wall return.
-#[test]
-fn replacing_near_returns_only_fill_rays_without_a_kept_return() {
+/// The seed table with its fog's near returns read as replacing lost
+/// returns (its occlusion test said so: a strongest-return sensor).
+fn replacing_table() -> murk_types::CoefficientTable {
     let mut t = seed_table();
     t.weathers.get_mut(&WeatherClass::Fog).unwrap().occlusion = Some(
         serde_json::from_value(serde_json::json!({
@@ -114,17 +114,11 @@ fn replacing_near_returns_only_fill_rays_without_a_kept_return() {
         }))
         .unwrap(),
     );
-    let build = |t: &murk_types::CoefficientTable| {
-        ApplyParams::new(WeatherClass::Fog, Severity::Mor(100.0))
-            .near_range(true)
-            .lidar(LidarSpec::vlp16())
-            .seed(3)
-            .build(t)
-            .unwrap()
-    };
-    // A wall at 12 m on the left half of the revolution, nothing on the
-    // right half; at MOR 100 the wall is kept (vanishing distance 34.6 m).
-    let full = wall(12.0);
+    t
+}
+
+/// The returns of `full` on the left half of the revolution (y ≥ 0).
+fn left_half(full: &PointCloud) -> PointCloud {
     let mut c = PointCloud::with_capacity(full.len());
     for i in 0..full.len() {
         if full.y[i] >= 0.0 {
@@ -137,6 +131,29 @@ fn replacing_near_returns_only_fill_rays_without_a_kept_return() {
             );
         }
     }
+    c
+}
+
+/// A table whose fog near returns *replace* lost returns (its occlusion
+/// test said so: a strongest-return sensor): a kept return's echo beats
+/// the weather's, so a soft target on a ray that still has a return is
+/// occluded whatever its range, and only rays whose return vanished (or
+/// that had none) get one. The same scan and seed without the flag: every
+/// soft target closer than the wall replaces a wall return.
+#[test]
+fn replacing_near_returns_only_fill_rays_without_a_kept_return() {
+    let t = replacing_table();
+    let build = |t: &murk_types::CoefficientTable| {
+        ApplyParams::new(WeatherClass::Fog, Severity::Mor(100.0))
+            .near_range(true)
+            .lidar(LidarSpec::vlp16())
+            .seed(3)
+            .build(t)
+            .unwrap()
+    };
+    // A wall at 12 m on the left half of the revolution, nothing on the
+    // right half; at MOR 100 the wall is kept (vanishing distance 34.6 m).
+    let c = left_half(&wall(12.0));
     let (out, s) = build(&t).apply(&c, "half wall").unwrap();
     let g = s.ghost.clone().unwrap();
     assert_eq!(s.vanished, 0);
@@ -186,32 +203,9 @@ fn replacing_near_returns_only_fill_rays_without_a_kept_return() {
 /// in five would.
 #[test]
 fn the_sky_of_a_replacing_weather_is_counted_on_the_scan_s_firings() {
-    let mut t = seed_table();
-    t.weathers.get_mut(&WeatherClass::Fog).unwrap().occlusion = Some(
-        serde_json::from_value(serde_json::json!({
-            "recordings": 20, "odds_ratio": 40.0, "p_value": 1e-12, "alpha": 0.01, "replaced": true,
-        }))
-        .unwrap(),
-    );
+    let t = replacing_table();
     let spec = LidarSpec::vlp16();
-    let mut c = PointCloud::with_capacity(16 * 720);
-    for bin in 0..1440 {
-        let az = (0.25 * bin as f64).to_radians();
-        if az.sin() < 0.0 {
-            continue;
-        }
-        for (ring, el) in spec.elevation_deg.iter().enumerate() {
-            let el = el.to_radians();
-            let r = 12.0 / el.cos();
-            c.push(
-                (r * el.cos() * az.cos()) as f32,
-                (r * el.cos() * az.sin()) as f32,
-                (r * el.sin()) as f32,
-                60.0,
-                ring as u16,
-            );
-        }
-    }
+    let c = left_half(&wall_of(12.0, 1440, |bin| 0.25 * bin as f64));
     let shown = |explicit: Option<f64>| {
         let mut p = ApplyParams::new(WeatherClass::Fog, Severity::Mor(100.0))
             .near_range(true)
