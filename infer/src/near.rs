@@ -411,24 +411,20 @@ pub(crate) fn add_near_range(
         if s.replaces_lost {
             // The sky's rays are the scan's firings without a return: on
             // the scan's own step where it shows one.
-            let step = s
+            let own = s
                 .measure_azimuth_step
                 .then(|| scan_step(input))
                 .flatten()
                 .filter(|&st| st != res);
-            match step {
-                Some(st) => {
-                    let phase = ring_phases(input, &rings, st);
-                    let fired = Wedges {
-                        rings: &rings,
-                        phase: &phase,
-                        res: st,
-                        bins: ((360.0 / st).round() as u64).max(1),
-                    };
-                    place_replacing(input, out, s, &events, &mut outcome, &fired);
-                }
-                None => place_replacing(input, out, s, &events, &mut outcome, &grid),
-            }
+            let own_phase = own.map_or_else(Vec::new, |st| ring_phases(input, &rings, st));
+            let fired = own.map(|st| Wedges {
+                rings: &rings,
+                phase: &own_phase,
+                res: st,
+                bins: murk_types::firing::firings_per_turn(st).0,
+            });
+            let sky = fired.as_ref().unwrap_or(&grid);
+            place_replacing(input, out, s, &events, &mut outcome, sky);
         } else {
             place(input, out, s, &events, &mut outcome, replaced);
         }
