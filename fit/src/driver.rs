@@ -180,8 +180,9 @@ pub fn read_file(path: &Path) -> Result<Vec<u8>, FitError> {
 
 /// Reads one LiDAR recording as scans: one per revolution of a `.pcap`
 /// (partial first and last revolutions left out, see the private `full_revolutions`), the
-/// whole file for every other format; calibrated intensity. Returns the scans
-/// and the file's SHA-256.
+/// whole file for every other format; calibrated intensity, points nearer
+/// than the declared `min_range_m` left out (not returns of the scene).
+/// Returns the scans and the file's SHA-256.
 pub fn read_scans(path: &Path, spec: &LidarSpec) -> Result<(Vec<PointCloud>, String), FitError> {
     let opts = ReadOptions {
         lidar: Some(spec.clone()),
@@ -202,6 +203,10 @@ pub fn read_scans(path: &Path, spec: &LidarSpec) -> Result<(Vec<PointCloud>, Str
     };
     for f in &mut frames {
         f.to_calibrated();
+        if spec.min_range_m.is_some() {
+            let keep: Vec<bool> = (0..f.len()).map(|i| spec.is_return(f.range(i))).collect();
+            f.retain_mask(&keep);
+        }
     }
     Ok((frames, digest))
 }
@@ -280,7 +285,8 @@ pub fn measure_geometry(inputs: &FitInputs) -> Result<(SensorGeometry, Vec<Strin
         all.merge(a?);
     }
     let g = all.finish(&inputs.lidar);
-    let w = crate::geometry::warnings(&g, &inputs.lidar);
+    let mut w = crate::geometry::warnings(&g, &inputs.lidar);
+    w.extend(all.near_points_warning(&inputs.lidar));
     Ok((g, w))
 }
 

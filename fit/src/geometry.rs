@@ -43,6 +43,13 @@ pub const MAX_FRAMES_PER_RECORDING: usize = 20;
 pub const STEP_TOLERANCE: f64 = 0.02;
 /// Disagreement of a ring elevation that is warned, degrees.
 pub const ELEVATION_TOLERANCE_DEG: f64 = 0.5;
+/// A point this near the sensor is no return of the scene (a LiDAR's
+/// housing and minimum range keep real returns farther): it is a firing
+/// without a return written as a point at the origin, or the vehicle's body.
+pub const NEAR_POINT_M: f64 = 0.3;
+/// Share of the measured points within [`NEAR_POINT_M`] that is warned when
+/// campaign.toml declares no `min_range_m`.
+pub const NEAR_POINT_SHARE: f64 = 0.005;
 /// Samples kept per ring and kind (differences, azimuths, elevations).
 const MAX_SAMPLES: usize = 200_000;
 
@@ -67,6 +74,9 @@ pub struct GeometryAcc {
     rings: Vec<RingSamples>,
     frames: u32,
     recordings: u32,
+    /// Points added, and those nearer than [`NEAR_POINT_M`].
+    points: u64,
+    near_points: u64,
 }
 
 impl GeometryAcc {
@@ -101,12 +111,18 @@ impl GeometryAcc {
         }
         self.frames += other.frames;
         self.recordings += other.recordings;
+        self.points += other.points;
+        self.near_points += other.near_points;
     }
 
     /// Adds one scan (a revolution of a `.pcap`, or a whole file).
     pub fn add_frame(&mut self, cloud: &PointCloud) {
         self.frames += 1;
         let n = cloud.len();
+        self.points += n as u64;
+        self.near_points += (0..n)
+            .filter(|&i| cloud.range(i) < NEAR_POINT_M as f32)
+            .count() as u64;
         let mut last: Vec<Option<f64>> = Vec::new();
         let mut per_ring: Vec<Vec<f32>> = Vec::new();
         for i in 0..n {
@@ -323,6 +339,26 @@ pub fn warnings(geometry: &SensorGeometry, declared: &LidarSpec) -> Vec<String> 
         ));
     }
     out
+}
+
+impl GeometryAcc {
+    /// The warning that the measured scans hold points no scene return
+    /// could give (at least [`NEAR_POINT_SHARE`] of them within
+    /// [`NEAR_POINT_M`]) while `declared` has no `min_range_m`: left in,
+    /// each such point's cell reads as "lost" whenever the weather puts a
+    /// return of its own on that ray, which no vanishing edge explains.
+    pub fn near_points_warning(&self, declared: &LidarSpec) -> Option<String> {
+        let share = self.near_points as f64 / self.points.max(1) as f64;
+        (declared.min_range_m.is_none() && self.near_points > 0 && share >= NEAR_POINT_SHARE)
+            .then(|| {
+                format!(
+                    "near points: {} of the {} points measured ({:.1} %) lie within {NEAR_POINT_M} m of the sensor — no scene return comes that close: they are firings without a return written as points (nuScenes, Ouster) or the vehicle itself; declare min_range_m under [lidar] in campaign.toml (nuScenes' tools use 1 m) so that murk leaves them out, or the weather's returns on those rays read as losses at the origin",
+                    self.near_points,
+                    self.points,
+                    share * 100.0
+                )
+            })
+    }
 }
 
 /// The declared geometry of `spec` (cells centred on multiples of the

@@ -149,6 +149,74 @@ fn a_replacement_table_applied_keeps_what_the_physics_keeps() {
     );
 }
 
+/// nuScenes keeps every firing of its HDL-32E: the ones without a return
+/// are points within about 1 m of the origin (8,029 of the sample scan's
+/// 34,688: no-return firings on the upward rings, the vehicle's own body on
+/// the downward ones). A strongest-return sensor in fog reports the fog's
+/// echo on those rays; left in the fit, each such point's cell is "lost" at
+/// r ≈ 0 in every fog recording, which no vanishing edge explains. The fit
+/// must say so (a warning naming `min_range_m`), and with `min_range_m = 1`
+/// declared must read the same survival as a fog whose echo leaves those
+/// points alone.
+#[test]
+fn points_at_the_origin_are_not_returns_once_declared() {
+    let Some((cloud, lidar)) = nuscenes() else {
+        return;
+    };
+    let fit_of = |marker_range_m: f64, min_range_m: Option<f64>| {
+        let mut cfg = physics_with(true, true, [10.0, 80.0]);
+        cfg.physics.as_mut().unwrap().marker_range_m = marker_range_m;
+        let spec = murk_types::LidarSpec {
+            min_range_m,
+            ..lidar.clone()
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let truth = semi_real::scan_campaign(&cloud, &spec, dir.path(), &cfg, 1).unwrap();
+        (fit(dir.path()), truth)
+    };
+    let near_warning = |t: &FittedTable| {
+        t.table()
+            .lidar
+            .warnings
+            .iter()
+            .find(|w| w.contains("min_range_m"))
+            .cloned()
+    };
+    let (undeclared, truth) = fit_of(1.0, None);
+    let echoed: usize = truth.recordings.iter().map(|r| r.ghosts).sum();
+    let w = near_warning(&undeclared).expect("a warning naming min_range_m");
+    eprintln!("undeclared: {w}");
+    assert!(w.contains("within 0.3 m"), "{w}");
+    for b in &fog(&undeclared).vanishing_slope {
+        eprintln!(
+            "  undeclared band {}: slope {:?} ({:?})",
+            b.reflectivity_min, b.slope, b.reason
+        );
+    }
+    let (declared, _) = fit_of(1.0, Some(1.0));
+    let (untouched, quiet) = fit_of(0.0, Some(1.0));
+    let quiet_echoes: usize = quiet.recordings.iter().map(|r| r.ghosts).sum();
+    eprintln!("fog echoes: {echoed} with the points at the origin open, {quiet_echoes} without");
+    assert!(echoed > quiet_echoes + 100_000, "{echoed} {quiet_echoes}");
+    assert_eq!(near_warning(&declared), None);
+    for (a, b) in fog(&declared)
+        .vanishing_slope
+        .iter()
+        .zip(&fog(&untouched).vanishing_slope)
+    {
+        let (sa, sb) = (
+            a.slope.expect("a slope once min_range_m is declared"),
+            b.slope.unwrap(),
+        );
+        eprintln!(
+            "  band {}: slope {sa:.4} with echoes at the origin's rays, {sb:.4} without ({:+.2} %)",
+            a.reflectivity_min,
+            (sa / sb - 1.0) * 100.0
+        );
+        assert!((sa / sb - 1.0).abs() < 0.02, "band {}", a.reflectivity_min);
+    }
+}
+
 /// The physics fog on the real VLP-16 scene with the fog's echo on every
 /// open ray too (a strongest-return sensor reports the fog wherever no hard
 /// target beats it: the sky, as well as the rays whose target was lost).

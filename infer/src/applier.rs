@@ -61,6 +61,8 @@ pub struct Applier {
     /// A replacing weather counts the sky on each scan's measured firing
     /// step (no explicit `azimuth_resolution_deg`).
     pub(crate) measure_azimuth_step: bool,
+    /// Points nearer than this are not returns.
+    pub(crate) min_range_m: Option<f64>,
     pub(crate) seed: u64,
     pub(crate) warnings: Vec<String>,
     pub(crate) extensions: Vec<murk_types::ModelExtension>,
@@ -175,7 +177,32 @@ impl Applier {
             mask.resize(cloud.len(), 1);
             return Ok(cloud.len() as u64);
         }
-        Ok(kernel::total(&self.vanish(cloud, key, mask)).kept)
+        let Some((returns, is_return)) = self.returns_only(cloud) else {
+            return Ok(kernel::total(&self.vanish(cloud, key, mask)).kept);
+        };
+        let kept = kernel::total(&self.vanish(&returns, key, mask)).kept;
+        let passed = scatter_mask(&is_return, mask);
+        Ok(kept + passed)
+    }
+
+    /// The scan's returns and each input point's flag (true: a return),
+    /// when the sensor description says some of its points are not returns
+    /// (nearer than `min_range_m`); `None` when every point is
+    /// one or the weather is clear. Call on a checked cloud.
+    fn returns_only(&self, cloud: &PointCloud) -> Option<(PointCloud, Vec<bool>)> {
+        let min_range = self.min_range_m?;
+        if self.identity {
+            return None;
+        }
+        let is_return: Vec<bool> = (0..cloud.len())
+            .map(|i| f64::from(cloud.range(i)) >= min_range)
+            .collect();
+        if is_return.iter().all(|&r| r) {
+            return None;
+        }
+        let mut returns = cloud.clone();
+        returns.retain_mask(&is_return);
+        Some((returns, is_return))
     }
 
     fn vanish(&self, cloud: &PointCloud, key: &str, mask: &mut Vec<u8>) -> Vec<kernel::Counts> {
@@ -208,19 +235,47 @@ impl Applier {
     /// seed) and labels errors and the summary. Use a name that is stable
     /// across runs, such as the file's path relative to the batch input, so
     /// that a scan gets the same output whatever else is in the batch.
+    ///
+    /// Points nearer than `min_range_m` ([`crate::ApplyParams::min_range_m`],
+    /// else the sensor description's) are not returns: they are written
+    /// as they were, in their places, and the weather's near returns may
+    /// show on their rays.
     pub fn apply(
         &self,
         cloud: &PointCloud,
         key: &str,
     ) -> Result<(PointCloud, ApplySummary), InferError> {
+        Self::check_cloud(cloud, key)?;
+        let mut mask = Vec::new();
+        let Some((returns, is_return)) = self.returns_only(cloud) else {
+            return self.apply_returns(cloud, key, &mut mask);
+        };
+        let (out, mut summary) = self.apply_returns(&returns, key, &mut mask)?;
+        let out = restore_non_returns(
+            cloud,
+            &is_return,
+            &mut mask,
+            Some(out),
+            &mut [],
+            &mut summary,
+        );
+        Ok((out.unwrap_or_else(|| cloud.clone()), summary))
+    }
+
+    /// [`Applier::apply`] on a checked cloud of returns only; `mask` gets
+    /// each point's fate.
+    fn apply_returns(
+        &self,
+        cloud: &PointCloud,
+        key: &str,
+        mask: &mut Vec<u8>,
+    ) -> Result<(PointCloud, ApplySummary), InferError> {
         if !self.identity && !self.extensions.is_empty() {
-            Self::check_cloud(cloud, key)?;
             let mut summary = ApplySummary::empty(key, &self.bands);
             summary.points_in = cloud.len() as u64;
-            return self.apply_extended(cloud, key, summary);
+            return self.apply_extended(cloud, key, summary, mask);
         }
-        let mut mask = Vec::new();
-        let (out, summary) = self.apply_masked(cloud, key, &mut mask, true)?;
+        let (out, summary) = self.marked_returns(cloud, key, mask, true, &mut Vec::new())?;
         Ok((out.unwrap_or_else(|| cloud.clone()), summary))
     }
 
@@ -281,6 +336,23 @@ impl Applier {
     ) -> Result<(Option<PointCloud>, ApplySummary), InferError> {
         replaced.clear();
         Self::check_cloud(cloud, key)?;
+        let Some((returns, is_return)) = self.returns_only(cloud) else {
+            return self.marked_returns(cloud, key, mask, want_cloud, replaced);
+        };
+        let (out, mut summary) = self.marked_returns(&returns, key, mask, want_cloud, replaced)?;
+        let out = restore_non_returns(cloud, &is_return, mask, out, replaced, &mut summary);
+        Ok((out, summary))
+    }
+
+    /// [`Applier::apply_marked`] on a checked cloud of returns only.
+    fn marked_returns(
+        &self,
+        cloud: &PointCloud,
+        key: &str,
+        mask: &mut Vec<u8>,
+        want_cloud: bool,
+        replaced: &mut Vec<usize>,
+    ) -> Result<(Option<PointCloud>, ApplySummary), InferError> {
         let mut summary = ApplySummary::empty(key, &self.bands);
         summary.points_in = cloud.len() as u64;
         if self.identity {
@@ -393,4 +465,77 @@ impl Applier {
         summary.ring = r;
         Ok(())
     }
+}
+
+/// Widens `mask`, the fate of each return, to every input point (`is_return`
+/// flags them): a point that is not a return is kept. Returns how many are
+/// not returns.
+fn scatter_mask(is_return: &[bool], mask: &mut Vec<u8>) -> u64 {
+    let of_returns = std::mem::take(mask);
+    let mut fate = of_returns.iter();
+    mask.reserve(is_return.len());
+    let mut passed = 0;
+    for &r in is_return {
+        if r {
+            mask.push(fate.next().copied().unwrap_or(1));
+        } else {
+            mask.push(1);
+            passed += 1;
+        }
+    }
+    passed
+}
+
+/// Puts the points of `cloud` that are not returns back in their places:
+/// `mask` (the fate of each return) becomes every input point's, `out` (the
+/// kept returns in order, then the added near returns) gets the others
+/// between them as they were, the output indices in `replaced` move with
+/// them, and `summary` counts them in and out.
+fn restore_non_returns(
+    cloud: &PointCloud,
+    is_return: &[bool],
+    mask: &mut Vec<u8>,
+    out: Option<PointCloud>,
+    replaced: &mut [usize],
+    summary: &mut ApplySummary,
+) -> Option<PointCloud> {
+    let passed = scatter_mask(is_return, mask);
+    summary.points_in += passed;
+    summary.points_out += passed;
+    summary.not_returns = passed;
+    let out = out?;
+    let mut merged = PointCloud::with_capacity(out.len() + passed as usize);
+    merged.intensity_scale = out.intensity_scale;
+    if out.time.is_some() {
+        merged.time = Some(Vec::with_capacity(out.len() + passed as usize));
+    }
+    let push = |dst: &mut PointCloud, src: &PointCloud, i: usize| {
+        dst.x.push(src.x[i]);
+        dst.y.push(src.y[i]);
+        dst.z.push(src.z[i]);
+        dst.intensity.push(src.intensity[i]);
+        dst.ring.push(src.ring[i]);
+        if let (Some(t), Some(s)) = (dst.time.as_mut(), src.time.as_ref()) {
+            t.push(s[i]);
+        }
+    };
+    // Output position of each kept return.
+    let mut at = Vec::with_capacity(out.len());
+    let mut k = 0;
+    for (i, &r) in is_return.iter().enumerate() {
+        if !r {
+            push(&mut merged, cloud, i);
+        } else if mask[i] != 0 {
+            at.push(merged.len());
+            push(&mut merged, &out, k);
+            k += 1;
+        }
+    }
+    for j in k..out.len() {
+        push(&mut merged, &out, j);
+    }
+    for r in replaced.iter_mut() {
+        *r = at[*r];
+    }
+    Some(merged)
 }

@@ -139,6 +139,7 @@ impl Applier {
         cloud: &PointCloud,
         key: &str,
         mut summary: ApplySummary,
+        mask: &mut Vec<u8>,
     ) -> Result<(PointCloud, ApplySummary), InferError> {
         let seed = ScanSeed::new(self.seed, key);
         let scan = &self.scan_covariates;
@@ -280,6 +281,8 @@ impl Applier {
                 summary.attenuated_points = out.len() as u64;
             }
         }
+        mask.clear();
+        mask.extend(per_chunk.iter().flatten().map(|o| u8::from(o.keep)));
         if self.near_range {
             let scaled = |l: &Option<crate::model::NearLaw>| {
                 l.clone().map(|mut l| {
@@ -288,13 +291,8 @@ impl Applier {
                 })
             };
             let (ghost, ring) = (scaled(&self.ghost), scaled(&self.ring));
-            let kept: Vec<u8> = per_chunk
-                .iter()
-                .flatten()
-                .map(|o| u8::from(o.keep))
-                .collect();
             self.add_near(
-                (cloud, &kept),
+                (cloud, mask),
                 &mut out,
                 (ghost.as_ref(), ring.as_ref()),
                 (seed, key),

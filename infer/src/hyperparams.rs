@@ -55,6 +55,7 @@ pub enum Severity {
 /// | `clear_mor_threshold_m` | [`DEFAULT_CLEAR_MOR_M`] | MOR at and above which applying is the identity | > 0 |
 /// | `lidar` | none | sensor description for near-range rays (ring elevations, azimuth grid); none: ring elevations are measured on each scan | a valid [`LidarSpec`] |
 /// | `azimuth_resolution_deg` | `lidar`'s, else [`DEFAULT_AZIMUTH_RESOLUTION_DEG`] | azimuth grid of near-range rays; unless set, a replacing weather (the table's occlusion test) counts the sky's rays on each scan's own firing step, measured on its first 16,384 points by [`murk_types::firing::mode_step`] | (0, 45] |
+/// | `min_range_m` | `lidar`'s `min_range_m`, else none | points nearer than this are not returns (no-return firings written as points at the origin, the vehicle's body): written as they were, in their places, and open rays for near-range returns | ≥ 0, finite |
 /// | `seed` | 0 | master seed of every random draw | any |
 ///
 /// ```
@@ -82,6 +83,7 @@ pub struct ApplyParams {
     clear_mor_threshold_m: Option<f64>,
     lidar: Option<LidarSpec>,
     azimuth_resolution_deg: Option<f64>,
+    min_range_m: Option<f64>,
     seed: u64,
     covariates: BTreeMap<String, CovariateValue>,
     extensions: bool,
@@ -104,6 +106,7 @@ impl ApplyParams {
             clear_mor_threshold_m: None,
             lidar: None,
             azimuth_resolution_deg: None,
+            min_range_m: None,
             seed: 0,
             covariates: BTreeMap::new(),
             extensions: true,
@@ -183,6 +186,13 @@ impl ApplyParams {
     /// Sets the azimuth grid of near-range rays.
     pub fn azimuth_resolution_deg(mut self, deg: f64) -> Self {
         self.azimuth_resolution_deg = Some(deg);
+        self
+    }
+
+    /// Points nearer than `m` metres are not returns (overrides the
+    /// `lidar` description's `min_range_m`).
+    pub fn min_range_m(mut self, m: f64) -> Self {
+        self.min_range_m = Some(m);
         self
     }
 
@@ -300,6 +310,7 @@ impl ApplyParams {
             lidar: self.lidar.clone(),
             azimuth_resolution_deg: scalars.azimuth_resolution_deg,
             measure_azimuth_step: self.azimuth_resolution_deg.is_none(),
+            min_range_m: scalars.min_range_m,
             seed: self.seed,
             warnings,
             extensions,
@@ -358,6 +369,14 @@ impl ApplyParams {
                 "must be in (0, 45] degrees",
             ));
         }
+        let min_range_m = self
+            .min_range_m
+            .or(self.lidar.as_ref().and_then(|l| l.min_range_m));
+        if let Some(m) = min_range_m
+            && !(m.is_finite() && m >= 0.0)
+        {
+            return Err(invalid("min_range_m", m, "must be finite and ≥ 0"));
+        }
         if self.soft_edge && self.slope_source == SlopeSource::Quantile {
             return Err(InferError::Conflict(
                 "soft_edge uses the survival fit's edge widths, which belong to vanishing_slope: it cannot be combined with slope_source = quantile".into(),
@@ -367,6 +386,7 @@ impl ApplyParams {
             range_scale,
             clear_mor,
             azimuth_resolution_deg: az_res,
+            min_range_m,
         })
     }
 
@@ -656,6 +676,7 @@ struct Scalars {
     range_scale: f64,
     clear_mor: f64,
     azimuth_resolution_deg: f64,
+    min_range_m: Option<f64>,
 }
 
 /// A parameter outside its range.

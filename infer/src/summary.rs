@@ -59,6 +59,11 @@ pub struct ApplySummary {
     pub range_noise_points: u64,
     /// Kept points whose intensity was attenuated (0 when off).
     pub attenuated_points: u64,
+    /// Input points nearer than the sensor description's `min_range_m`:
+    /// not returns of the scene (no-return firings kept as points at the
+    /// origin, the vehicle's body), written as they were and counted in
+    /// `points_in` and `points_out` only.
+    pub not_returns: u64,
     /// Anything the user should know (e.g. near-range returns not placed).
     pub warnings: Vec<String>,
 }
@@ -88,6 +93,7 @@ impl ApplySummary {
             ring: None,
             range_noise_points: 0,
             attenuated_points: 0,
+            not_returns: 0,
             warnings: Vec::new(),
         }
     }
@@ -113,6 +119,7 @@ impl ApplySummary {
         }
         self.range_noise_points += o.range_noise_points;
         self.attenuated_points += o.attenuated_points;
+        self.not_returns += o.not_returns;
         self.warnings.extend(o.warnings.iter().cloned());
     }
 

@@ -240,6 +240,107 @@ fn farther_soft_targets_are_occluded() {
     assert_eq!(out, c);
 }
 
+/// The VLP-16 description with points nearer than `min_range_m` declared
+/// not returns.
+fn with_min_range(min_range_m: Option<f64>) -> LidarSpec {
+    LidarSpec {
+        min_range_m,
+        ..LidarSpec::vlp16()
+    }
+}
+
+#[test]
+fn points_nearer_than_the_minimum_range_are_not_returns() {
+    // The 0.3 m wall of the test above, declared not returns (a format that
+    // writes its no-return firings as points at the origin): nothing hides
+    // the near returns, every one is added on its open ray, and the wall is
+    // written as it was, first, in its order.
+    let c = wall(0.3);
+    let applier = |min_range_m| {
+        ApplyParams::new(WeatherClass::Fog, Severity::Mor(100.0))
+            .near_range(true)
+            .lidar(with_min_range(min_range_m))
+            .seed(2)
+            .build(&seed_table())
+            .unwrap()
+    };
+    let (hidden, s) = applier(None).apply(&c, "near wall").unwrap();
+    assert_eq!(hidden, c);
+    assert_eq!(s.not_returns, 0);
+    let (out, s) = applier(Some(0.5)).apply(&c, "near wall").unwrap();
+    assert_eq!(s.not_returns, c.len() as u64);
+    assert_eq!((s.points_in, s.vanished), (c.len() as u64, 0));
+    let (g, r) = (s.ghost.unwrap(), s.ring.unwrap());
+    assert!(g.drawn > 0 && r.drawn > 0);
+    assert_eq!((g.occluded, r.occluded, g.replaced, r.replaced), (0, 0, 0, 0));
+    assert_eq!(g.added + g.unplaced, g.drawn);
+    assert_eq!(r.added + r.unplaced, r.drawn);
+    assert_eq!(out.len() as u64, s.points_out);
+    assert_eq!(out.len(), c.len() + (g.added + r.added) as usize);
+    assert_eq!(out.x[..c.len()], c.x[..]);
+    assert_eq!(out.z[..c.len()], c.z[..]);
+}
+
+#[test]
+fn points_that_are_not_returns_keep_their_places_and_values() {
+    // Every third firing of a 12 m wall written as a point 5 cm from the
+    // sensor (nuScenes keeps its no-return firings so). With every option
+    // on, those points come out untouched and in their order among the
+    // rest, and the returns come out exactly as from the scan without them.
+    let wall = wall(12.0);
+    let mut c = PointCloud::with_capacity(wall.len());
+    let mut returns = PointCloud::with_capacity(wall.len());
+    let mut markers = Vec::new();
+    for i in 0..wall.len() {
+        let (x, y, z) = (wall.x[i], wall.y[i], wall.z[i]);
+        if i % 3 == 0 {
+            let f = 0.05 / wall.range(i);
+            c.push(x * f, y * f, z * f, 3.0, wall.ring[i]);
+            markers.push([x * f, y * f, z * f, 3.0]);
+        } else {
+            c.push(x, y, z, wall.intensity[i], wall.ring[i]);
+            returns.push(x, y, z, wall.intensity[i], wall.ring[i]);
+        }
+    }
+    let applier = |min_range_m| {
+        ApplyParams::new(WeatherClass::Fog, Severity::Mor(40.0))
+            .near_range(true)
+            .range_noise_m(0.03)
+            .attenuate_intensity(true)
+            .soft_edge(true)
+            .lidar(with_min_range(min_range_m))
+            .seed(5)
+            .build(&seed_table())
+            .unwrap()
+    };
+    let (out, s) = applier(Some(1.0)).apply(&c, "scan").unwrap();
+    let (alone, s_alone) = applier(None).apply(&returns, "scan").unwrap();
+    assert_eq!(s.not_returns, markers.len() as u64);
+    assert_eq!(s.points_out, s_alone.points_out + markers.len() as u64);
+    assert_eq!(s.vanished, s_alone.vanished);
+    assert!(s.vanished > 0 && s.ghost.as_ref().unwrap().drawn > 0);
+    let point = |p: &PointCloud, i: usize| [p.x[i], p.y[i], p.z[i], p.intensity[i]];
+    // Near returns start at 0.5 m: the points within 0.1 m are the markers.
+    let (near, rest): (Vec<usize>, Vec<usize>) = (0..out.len()).partition(|&i| out.range(i) < 0.1);
+    let near: Vec<[f32; 4]> = near.iter().map(|&i| point(&out, i)).collect();
+    assert_eq!(near, markers);
+    let rest: Vec<[f32; 4]> = rest.iter().map(|&i| point(&out, i)).collect();
+    let alone: Vec<[f32; 4]> = (0..alone.len()).map(|i| point(&alone, i)).collect();
+    assert_eq!(rest, alone);
+    // The mask form agrees: every marker kept.
+    let mut mask = Vec::new();
+    let mut replaced = Vec::new();
+    let (_, s_marked) = applier(Some(1.0))
+        .apply_marked(&c, "scan", &mut mask, true, &mut replaced)
+        .unwrap();
+    assert_eq!(s_marked, s);
+    assert!((0..c.len()).step_by(3).all(|i| mask[i] == 1));
+    assert_eq!(
+        mask.iter().map(|&m| u64::from(m)).sum::<u64>(),
+        s.points_in - s.vanished
+    );
+}
+
 #[test]
 fn soft_targets_on_empty_rays_are_added_on_the_grid() {
     // No return at all: every soft target is added on its grid ray, at the

@@ -28,6 +28,7 @@
 //! | `intensity_scale` | `calibrated`, `kitti`, `six-bit`, `{ gain = G, offset = O }` | the format's (KITTI `.bin`: `kitti`; others `calibrated`) |
 //! | `bin_layout` | `xyzi` (KITTI), `xyzir` (Seeing Through Fog, nuScenes), `xyzit` | `.bin`: `xyzi` when the file size fits only it; a size that fits several layouts is refused |
 //! | `csv_columns` | e.g. `["x", "y", "z", "intensity", "ring"]` | none: CSV files start with a header line |
+//! | `min_range_m` | metres, e.g. `1.0`: nearer points are not returns (no-return firings kept as points at the origin, the vehicle's body) | none: every point is a return |
 //!
 //! ```
 //! use murk_campaign::Campaign;

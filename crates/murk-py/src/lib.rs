@@ -280,6 +280,7 @@ struct ApplyArgs<'a, 'py> {
     extensions: bool,
     range_scale: Option<f64>,
     clear_mor_threshold: Option<f64>,
+    min_range: Option<f64>,
 }
 
 /// `ApplyArgs` → `ApplyParams`, as `murk apply` builds them from its flags.
@@ -325,6 +326,9 @@ fn apply_params(a: &ApplyArgs<'_, '_>) -> PyResult<ApplyParams> {
     if let Some(m) = a.clear_mor_threshold {
         params = params.clear_mor_threshold_m(m);
     }
+    if let Some(m) = a.min_range {
+        params = params.min_range_m(m);
+    }
     Ok(params)
 }
 
@@ -335,7 +339,7 @@ fn apply_params(a: &ApplyArgs<'_, '_>) -> PyResult<ApplyParams> {
     intensity_scale=None, near_range=false, near_range_count_scale=1.0, soft_edge=false,
     range_noise=None, attenuate_intensity=false, slope="survival", clamp=false,
     covariates=None, extensions=true, range_scale=None, clear_mor_threshold=None,
-    threads=None, summary=false
+    min_range=None, threads=None, summary=false
 ))]
 #[allow(clippy::too_many_arguments)]
 fn apply(
@@ -360,6 +364,7 @@ fn apply(
     extensions: bool,
     range_scale: Option<f64>,
     clear_mor_threshold: Option<f64>,
+    min_range: Option<f64>,
     threads: Option<usize>,
     summary: bool,
 ) -> PyResult<Py<PyAny>> {
@@ -383,6 +388,7 @@ fn apply(
         extensions,
         range_scale,
         clear_mor_threshold,
+        min_range,
     })?;
     let points = cloud::extract(points, layout, "points")?;
     let scale = scale_arg(intensity_scale)?.unwrap_or_else(|| points.default_scale());
@@ -501,7 +507,8 @@ fn plan(
     input, output, key, table, weather, *, mor=None, rain_rate=None, seed=0, format=None,
     pcd_data="binary", intensity_scale=None, near_range=false, near_range_count_scale=1.0,
     soft_edge=false, range_noise=None, attenuate_intensity=false, slope="survival", clamp=false,
-    covariates=None, extensions=true, range_scale=None, clear_mor_threshold=None, threads=None
+    covariates=None, extensions=true, range_scale=None, clear_mor_threshold=None, min_range=None,
+    threads=None
 ))]
 #[allow(clippy::too_many_arguments)]
 fn apply_file(
@@ -528,6 +535,7 @@ fn apply_file(
     extensions: bool,
     range_scale: Option<f64>,
     clear_mor_threshold: Option<f64>,
+    min_range: Option<f64>,
     threads: Option<usize>,
 ) -> PyResult<Py<PyAny>> {
     let (table, label) = table_arg(table)?;
@@ -547,6 +555,7 @@ fn apply_file(
         extensions,
         range_scale,
         clear_mor_threshold,
+        min_range,
     })?;
     let opts = batch_options(format, pcd_data, intensity_scale)?;
     let parent = output

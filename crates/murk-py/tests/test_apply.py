@@ -99,6 +99,21 @@ def test_summary_counts(table):
     assert s["model"]["weather"] == "fog" and s["model"]["mor_m"] == 30
 
 
+def test_points_nearer_than_min_range_are_written_as_they_were(table):
+    # Every seventh point moved to 1 cm from the sensor, as nuScenes writes
+    # its no-return firings: with range noise on, those rows come out exactly
+    # as they went in and in their order; without min_range they are moved.
+    pts = scan(20000, seed=5)
+    near = np.arange(len(pts)) % 7 == 0
+    pts[near, :3] *= 0.01 / np.linalg.norm(pts[near, :3], axis=1, keepdims=True)
+    for min_range, untouched in [(0.5, True), (None, False)]:
+        out, s = murk.apply(pts, table, "fog", mor=30, range_noise=0.05, seed=2, min_range=min_range, summary=True)
+        close = np.linalg.norm(out[:, :3], axis=1) < 0.1
+        assert np.array_equal(out[close], pts[near]) == untouched
+        assert s["scan"]["not_returns"] == (near.sum() if untouched else 0)
+        assert s["scan"]["points_out"] == len(out)
+
+
 def test_empty_scan(table):
     out = murk.apply(np.zeros((0, 4), np.float32), table, "fog", mor=30)
     assert out.shape == (0, 4) and out.dtype == np.float32

@@ -32,6 +32,11 @@ VARIANTS = [
         dict(mor=80.0, range_noise=0.05, attenuate_intensity=True, seed=5),
     ),
     ("rain", ["--rain-rate", "20", "--clamp", "--slope", "quantile"], dict(rain_rate=20.0, clamp=True, slope="quantile")),
+    (
+        "fog",
+        ["--mor", "30", "--near-range", "--range-noise", "0.05", "--min-range", "1", "--seed", "7"],
+        dict(mor=30.0, near_range=True, range_noise=0.05, min_range=1.0, seed=7),
+    ),
 ]
 
 

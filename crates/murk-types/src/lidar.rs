@@ -22,6 +22,15 @@ pub struct LidarSpec {
     /// Maximum range of the sensor, metres.
     #[serde(default = "default_max_range")]
     pub max_range_m: f64,
+    /// Points nearer than this (metres from the sensor) are not returns of
+    /// the scene: formats that keep every firing write the ones without a
+    /// return as points at or near the origin (nuScenes, Ouster), and a
+    /// roof-mounted sensor sees the vehicle itself. murk's fit and diagnosis
+    /// leave them out and `murk apply` passes them through untouched.
+    /// Absent means every point is a return (nuScenes' own tools drop
+    /// points within 1 m).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub min_range_m: Option<f64>,
     /// Scale of the `intensity` stored in this campaign's files; absent means
     /// the format's default (calibrated for PCD/CSV/Parquet, KITTI for `.bin`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -62,6 +71,7 @@ impl LidarSpec {
             elevation_deg: VLP16_ELEVATION_DEG.to_vec(),
             azimuth_resolution_deg: 0.2,
             max_range_m: 100.0,
+            min_range_m: None,
             intensity_scale: None,
             bin_layout: None,
             csv_columns: None,
@@ -101,7 +111,21 @@ impl LidarSpec {
         if !(self.max_range_m.is_finite() && self.max_range_m > 0.0) {
             return bad(format!("max_range_m {} must be > 0", self.max_range_m));
         }
+        if let Some(m) = self.min_range_m
+            && !(m.is_finite() && m >= 0.0 && m < self.max_range_m)
+        {
+            return bad(format!(
+                "min_range_m {m} must be ≥ 0 and below max_range_m {}",
+                self.max_range_m
+            ));
+        }
         Ok(())
+    }
+
+    /// True when a point at `range_m` from the sensor is a return of the
+    /// scene: not nearer than [`LidarSpec::min_range_m`].
+    pub fn is_return(&self, range_m: f32) -> bool {
+        self.min_range_m.is_none_or(|m| f64::from(range_m) >= m)
     }
 
     /// Number of rings.
@@ -182,6 +206,20 @@ mod tests {
                 .to_string()
                 .contains("range_scale")
         );
+    }
+
+    #[test]
+    fn min_range_sets_which_points_are_returns() {
+        let mut s = LidarSpec::vlp16();
+        assert!(s.is_return(0.0));
+        s.min_range_m = Some(1.0);
+        s.validate().unwrap();
+        assert!(!s.is_return(0.99) && s.is_return(1.0) && s.is_return(50.0));
+        for bad in [-0.5, f64::NAN, 100.0, 250.0] {
+            s.min_range_m = Some(bad);
+            let e = s.validate().unwrap_err().to_string();
+            assert!(e.contains("min_range_m") && e.contains("max_range_m"), "{e}");
+        }
     }
 
     #[test]

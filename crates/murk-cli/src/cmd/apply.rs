@@ -115,9 +115,16 @@ pub struct Args {
     #[arg(long)]
     pub keep_partial: bool,
     /// A campaign folder whose `[lidar]` describes the input sensor (ring
-    /// elevations for ring derivation and near-range rays, azimuth grid).
+    /// elevations for ring derivation and near-range rays, azimuth grid,
+    /// `min_range_m`).
     #[arg(long)]
     pub campaign: Option<PathBuf>,
+    /// Points nearer than this (metres) are not returns — the no-return
+    /// firings nuScenes and Ouster files keep as points at the origin, the
+    /// vehicle's body: written as they were (default: the campaign's
+    /// `min_range_m`, else every point is a return).
+    #[arg(long, value_name = "M")]
+    pub min_range: Option<f64>,
     /// MOR (m) at and above which applying is the identity (default 2000,
     /// the PDD rules' clear threshold; the table does not record one).
     #[arg(long)]
@@ -188,6 +195,9 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     }
     if let Some(spec) = &lidar {
         params = params.lidar(spec.clone());
+    }
+    if let Some(m) = a.min_range {
+        params = params.min_range_m(m);
     }
     let applier = params.build_from_file(&a.coefficients)?;
     for w in applier.warnings() {
@@ -383,5 +393,11 @@ fn print_summary(
     }
     if t.attenuated_points > 0 {
         outln!("  intensity attenuated on {} points", t.attenuated_points);
+    }
+    if t.not_returns > 0 {
+        outln!(
+            "  {} points nearer than the minimum range written as they were (not returns)",
+            t.not_returns
+        );
     }
 }

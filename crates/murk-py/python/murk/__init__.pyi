@@ -119,6 +119,7 @@ def apply(
     extensions: bool = True,
     range_scale: Optional[float] = None,
     clear_mor_threshold: Optional[float] = None,
+    min_range: Optional[float] = None,
     threads: Optional[int] = None,
     summary: Literal[False] = False,
 ) -> Any:
@@ -141,7 +142,9 @@ def apply(
 
     ``intensity_scale``: the scale the input's intensity is in (default: KITTI
     0–1 for ``xyzi``, calibrated otherwise; names as ``--intensity-scale``, or
-    ``(gain, offset)``). ``summary=True`` also returns the applied model and
+    ``(gain, offset)``). ``min_range``: points nearer than this many metres
+    are not returns (nuScenes' no-return firings at the origin): written as
+    they were, in their places. ``summary=True`` also returns the applied model and
     the scan's counts (``murk-apply-summary/1``'s ``model`` and file entry).
     """
 
@@ -168,6 +171,7 @@ def apply(
     extensions: bool = True,
     range_scale: Optional[float] = None,
     clear_mor_threshold: Optional[float] = None,
+    min_range: Optional[float] = None,
     threads: Optional[int] = None,
     summary: Literal[True],
 ) -> Tuple[Any, Dict[str, Any]]: ...
@@ -339,6 +343,7 @@ def apply_file(
     extensions: bool = True,
     range_scale: Optional[float] = None,
     clear_mor_threshold: Optional[float] = None,
+    min_range: Optional[float] = None,
     threads: Optional[int] = None,
 ) -> Dict[str, Any]:
     """One job of ``murk apply`` (read, apply with scan key ``key``, write atomically),
