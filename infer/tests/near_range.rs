@@ -272,7 +272,10 @@ fn points_nearer_than_the_minimum_range_are_not_returns() {
     assert_eq!((s.points_in, s.vanished), (c.len() as u64, 0));
     let (g, r) = (s.ghost.unwrap(), s.ring.unwrap());
     assert!(g.drawn > 0 && r.drawn > 0);
-    assert_eq!((g.occluded, r.occluded, g.replaced, r.replaced), (0, 0, 0, 0));
+    assert_eq!(
+        (g.occluded, r.occluded, g.replaced, r.replaced),
+        (0, 0, 0, 0)
+    );
     assert_eq!(g.added + g.unplaced, g.drawn);
     assert_eq!(r.added + r.unplaced, r.drawn);
     assert_eq!(out.len() as u64, s.points_out);

@@ -218,7 +218,10 @@ mod tests {
         for bad in [-0.5, f64::NAN, 100.0, 250.0] {
             s.min_range_m = Some(bad);
             let e = s.validate().unwrap_err().to_string();
-            assert!(e.contains("min_range_m") && e.contains("max_range_m"), "{e}");
+            assert!(
+                e.contains("min_range_m") && e.contains("max_range_m"),
+                "{e}"
+            );
         }
     }
 
