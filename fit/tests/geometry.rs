@@ -384,3 +384,75 @@ fn recordings_of_different_lengths_give_the_slopes() {
         assert!((g / w - 1.0).abs() < 0.03, "slope {g} vs truth {w}");
     }
 }
+
+/// Clear recordings as HDL-32E captures (`.pcap` of packets tagged 0x21 at
+/// its 553 µs period, written field by field by `murk_velodyne::synth`):
+/// murk decodes them on the HDL-32E's 32 lasers and the fit measures the
+/// unit's own step (0.166° at 600 rpm) and each laser's elevation. The
+/// same recordings with the elevations declared in ascending order, not by
+/// laser id (a datasheet's table copied as it is printed), are warned.
+#[test]
+fn hdl32e_pcap_recordings_are_measured_on_their_own_lasers() {
+    let hdl = murk_types::LidarSpec::hdl32e();
+    let write = |elevations: &[f64]| {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        std::fs::create_dir_all(d.join("lidar")).unwrap();
+        let el: Vec<String> = elevations.iter().map(|e| format!("{e}")).collect();
+        std::fs::write(
+            d.join("campaign.toml"),
+            format!(
+                "name = \"hdl32e\"\nrules = \"pdd-2022-2023\"\n[lidar]\nmodel = \"HDL32E\"\nelevation_deg = [{}]\nazimuth_resolution_deg = 0.166\n",
+                el.join(", ")
+            ),
+        )
+        .unwrap();
+        let mut csv = String::from(
+            "recording,timestamp,PWD12_Weather Type,PWD12_Rain intensity (mm/h),PWD12_MOR (m),PWD12_Temperature (°C),VS2K_MOR (m),WXT530_Rain intensity (mm/h)\n",
+        );
+        for k in 0..3u32 {
+            let sweep = murk_velodyne::synth::Sweep {
+                rpm: 600.0,
+                packets: 400,
+                start_azimuth_deg: 40.0 * f64::from(k),
+                model: murk_velodyne::SensorModel::Hdl32e,
+                ..murk_velodyne::synth::Sweep::default()
+            };
+            std::fs::write(d.join("lidar").join(format!("r{k}.pcap")), sweep.to_pcap()).unwrap();
+            csv.push_str(&format!(
+                "r{k},2023-01-14T0{k}:00:00Z,Clear,0,20000,2.0,20000,0\n"
+            ));
+        }
+        std::fs::write(d.join("weather.csv"), csv).unwrap();
+        let campaign = Campaign::open(d).unwrap();
+        let inputs = murk_fit::observe::FitInputs::from_campaign(&campaign);
+        let got = murk_fit::observe::measure_geometry(&inputs).unwrap();
+        (dir, got)
+    };
+    let (_d, (g, warnings)) = write(&hdl.elevation_deg);
+    assert!(warnings.is_empty(), "{warnings:?}");
+    assert_eq!(g.source, "measured");
+    assert_eq!(g.rings.len(), 32);
+    let step = 360.0 / (360.0 / (10.0f64 * 360.0 * 46.08e-6)).round();
+    assert!(
+        (g.azimuth_step_deg / step - 1.0).abs() < 0.005,
+        "step {} against {step}",
+        g.azimuth_step_deg
+    );
+    for r in &g.rings {
+        let want = hdl.elevation_deg[r.ring as usize];
+        let e = r.elevation_deg.expect("measured");
+        assert!(
+            (e - want).abs() < 0.01,
+            "ring {}: {e} against {want}",
+            r.ring
+        );
+    }
+    let mut sorted = hdl.elevation_deg.clone();
+    sorted.sort_by(f64::total_cmp);
+    let (_d, (_, warnings)) = write(&sorted);
+    assert!(
+        warnings.iter().any(|w| w.starts_with("ring elevations")),
+        "{warnings:?}"
+    );
+}

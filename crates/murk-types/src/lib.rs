@@ -75,7 +75,7 @@ pub use extension::{
 };
 pub use format::{BinLayout, PointFormat};
 pub use intensity::IntensityScale;
-pub use lidar::LidarSpec;
+pub use lidar::{HDL32E_ELEVATION_DEG, LidarSpec, VLP16_ELEVATION_DEG};
 pub use table::{
     ClearCoefficients, CoefficientTable, CountLaw, CountLawChoice, CountUnit, EdgeTest,
     ExcludedRecording, Gaussian, InputDigest, Interval, LackOfFit, LawChoice, MorBin, NoiseLaw,

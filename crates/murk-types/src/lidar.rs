@@ -62,7 +62,27 @@ pub const VLP16_ELEVATION_DEG: [f64; 16] = [
     -15.0, 1.0, -13.0, 3.0, -11.0, 5.0, -9.0, 7.0, -7.0, 9.0, -5.0, 11.0, -3.0, 13.0, -1.0, 15.0,
 ];
 
+/// HDL-32E laser elevations by laser id (degrees): the even lasers from
+/// −30.67° and the odd ones from −9.33° up by 4/3°, interleaved (the
+/// sensor's own calibration).
+pub const HDL32E_ELEVATION_DEG: [f64; 32] = [
+    -30.67, -9.33, -29.33, -8.0, -28.0, -6.67, -26.67, -5.33, -25.33, -4.0, -24.0, -2.67, -22.67,
+    -1.33, -21.33, 0.0, -20.0, 1.33, -18.67, 2.67, -17.33, 4.0, -16.0, 5.33, -14.67, 6.67, -13.33,
+    8.0, -12.0, 9.33, -10.67, 10.67,
+];
+
 impl LidarSpec {
+    /// The Velodyne HDL-32E at 10 Hz (a firing every 0.166°: 2,170 a
+    /// turn).
+    pub fn hdl32e() -> Self {
+        LidarSpec {
+            model: "HDL32E".into(),
+            elevation_deg: HDL32E_ELEVATION_DEG.to_vec(),
+            azimuth_resolution_deg: 0.166,
+            ..LidarSpec::vlp16()
+        }
+    }
+
     /// The Velodyne VLP-16 as the PDD site used it.
     pub fn vlp16() -> Self {
         LidarSpec {

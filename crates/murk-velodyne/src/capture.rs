@@ -66,6 +66,9 @@ pub struct CaptureStats {
     /// [`crate::PcapOptions::keep_truncated_tail`] kept the packets before
     /// it (`None`: the capture ends on a record boundary).
     pub truncated_tail: Option<String>,
+    /// The sensor the data packets were decoded as (from their product
+    /// byte and packet period).
+    pub sensor: Option<crate::SensorModel>,
 }
 
 impl CaptureStats {

@@ -1,14 +1,15 @@
-//! From pcap bytes to frames: packet classification, VLP-16 data-packet
-//! decoding, azimuth interpolation and frame splitting.
+//! From pcap bytes to frames: packet classification, telling the sensor
+//! (VLP-16 or HDL-32E, [`SensorModel`]), data-packet decoding, azimuth
+//! interpolation and frame splitting.
 
 use std::path::Path;
 
-use murk_types::{LidarSpec, PointCloud};
+use murk_types::PointCloud;
 
 use crate::pcap::{self, Other, Packet, Records};
 use crate::{
     Capture, CaptureStats, ForeignPolicy, FrameStats, PcapOptions, ProductPolicy, ReturnMode,
-    ReturnSelect, VelodyneError,
+    ReturnSelect, SensorModel, VelodyneError,
 };
 
 /// Payload length of a data packet.
@@ -19,16 +20,10 @@ pub const POSITION_PAYLOAD_LEN: usize = 512;
 pub const BLOCKS: usize = 12;
 /// Bytes per block: flag, azimuth, 32 channel records of 3 bytes.
 pub const BLOCK_LEN: usize = 100;
-/// Lasers of the VLP-16.
-pub const LASERS: usize = 16;
+/// Most lasers of a sensor this crate decodes (the HDL-32E's).
+const MAX_LASERS: usize = 32;
 /// Distance unit of a channel record, metres.
 pub const DISTANCE_UNIT_M: f32 = 0.002;
-/// Time between two lasers of a firing sequence, µs.
-pub const LASER_PERIOD_US: f64 = 2.304;
-/// Time between two firing sequences, µs.
-pub const SEQUENCE_PERIOD_US: f64 = 55.296;
-/// Time covered by one block (two firing sequences), µs.
-pub const BLOCK_PERIOD_US: f64 = 2.0 * SEQUENCE_PERIOD_US;
 
 /// The largest azimuth step accepted between two consecutive blocks (dual:
 /// block pairs), hundredths of a degree: 2.5 times the 0.8° of a VLP-16 at
@@ -40,9 +35,8 @@ const MAX_BLOCK_STEP: u16 = 200;
 const FULL_FRAME_EDGE: f32 = 100.0;
 /// Microseconds in the hour that the packet timestamp counts.
 const HOUR_US: i64 = 3_600_000_000;
-/// Packet period of a VLP-16, single and dual return, µs.
-const PERIOD_SINGLE_US: f64 = BLOCKS as f64 * BLOCK_PERIOD_US;
-const PERIOD_DUAL_US: f64 = PERIOD_SINGLE_US / 2.0;
+/// Data packets read to tell a capture's sensor by its packet period.
+const DETECT_PACKETS: usize = 64;
 
 /// Decodes a classic libpcap capture held in memory.
 ///
@@ -74,9 +68,10 @@ pub fn decode_pcap_named(
         link_type: header.link_type,
         ..CaptureStats::default()
     };
-    let mut frames = Assembler::new(opts.return_mode);
+    let model = detect_model(header, bytes, name, opts)?;
+    stats.sensor = Some(model);
+    let mut frames = Assembler::new(opts.return_mode, model);
     let mut clock = Clock::default();
-    let mut period = PeriodCheck::default();
 
     for record in Records::new(header, bytes, name) {
         let record = match record {
@@ -96,9 +91,8 @@ pub fn decode_pcap_named(
         };
         match classify(pcap::parse_frame(header.link_type, record.data), opts) {
             Kind::Data(payload) => {
-                let packet = check_data(payload, opts, &at)?;
+                let packet = check_data(payload, opts, model, &at)?;
                 let ts = clock.unwrap(packet.timestamp_us);
-                period.observe(ts, packet.mode, packet.product, at.packet, at.offset);
                 *stats.return_modes.entry(packet.mode).or_default() += 1;
                 *stats.product_ids.entry(packet.product).or_default() += 1;
                 stats.packets_data += 1;
@@ -122,9 +116,6 @@ pub fn decode_pcap_named(
             position: stats.packets_position,
             foreign: stats.packets_foreign_skipped,
         });
-    }
-    if opts.products == ProductPolicy::Vlp16 {
-        period.verify(name)?;
     }
     stats.no_return = frames.no_return;
     stats.dual_duplicates = frames.dual_duplicates;
@@ -233,7 +224,12 @@ struct DataHeader {
     product: u8,
 }
 
-fn check_data(payload: &[u8], opts: &PcapOptions, at: &At) -> Result<DataHeader, VelodyneError> {
+fn check_data(
+    payload: &[u8],
+    opts: &PcapOptions,
+    model: SensorModel,
+    at: &At,
+) -> Result<DataHeader, VelodyneError> {
     let timestamp_us =
         u32::from_le_bytes([payload[1200], payload[1201], payload[1202], payload[1203]]);
     let mode_byte = payload[1204];
@@ -243,17 +239,29 @@ fn check_data(payload: &[u8], opts: &PcapOptions, at: &At) -> Result<DataHeader,
             "unknown return-mode byte 0x{mode_byte:02x} at payload byte 1204 (expected 0x37 strongest, 0x38 last or 0x39 dual)"
         ))
     })?;
-    if opts.products == ProductPolicy::Vlp16 && !matches!(product, 0x21..=0x23) {
-        return Err(VelodyneError::UnsupportedProduct {
-            path: at.path.into(),
-            packet: at.packet,
-            offset: at.offset,
-            product,
-            reason: format!(
-                "{} packets are not VLP-16 geometry; only 0x22 (VLP-16), 0x23 (Puck LITE) and VLP-16 captures tagged 0x21 are decoded (ProductPolicy::Any decodes any product as a VLP-16)",
+    if opts.products == ProductPolicy::Known {
+        let reason = if !matches!(product, 0x21..=0x23) {
+            Some(format!(
+                "{} packets are not a geometry murk decodes; only 0x22 (VLP-16), 0x23 (Puck LITE) and 0x21 (HDL-32E, or a VLP-16 tagged so, told by the packet period) are (ProductPolicy::Any decodes any product as a VLP-16)",
                 product_name(product)
-            ),
-        });
+            ))
+        } else if model == SensorModel::Hdl32e && product != 0x21 {
+            Some(format!(
+                "{} packets in a capture of HDL-32E packets: one capture holds one sensor",
+                product_name(product)
+            ))
+        } else {
+            None
+        };
+        if let Some(reason) = reason {
+            return Err(VelodyneError::UnsupportedProduct {
+                path: at.path.into(),
+                packet: at.packet,
+                offset: at.offset,
+                product,
+                reason,
+            });
+        }
     }
     if i64::from(timestamp_us) >= HOUR_US {
         return Err(at.bad(format!(
@@ -318,62 +326,92 @@ impl Clock {
     }
 }
 
-/// Tells a VLP-16 tagged 0x21 from an HDL-32E by the packet period.
-#[derive(Default)]
-struct PeriodCheck {
-    /// First packet tagged 0x21: index and offset.
-    first_0x21: Option<(u64, u64)>,
-    prev: Option<(i64, ReturnMode)>,
-    /// Gap to the previous data packet over the VLP-16 period of its mode.
-    ratios: Vec<f32>,
-}
-
-impl PeriodCheck {
-    fn observe(&mut self, ts: i64, mode: ReturnMode, product: u8, packet: u64, offset: u64) {
-        if product == 0x21 && self.first_0x21.is_none() {
-            self.first_0x21 = Some((packet, offset));
-        }
-        if let Some((prev_ts, prev_mode)) = self.prev {
-            let period = match prev_mode {
-                ReturnMode::Dual => PERIOD_DUAL_US,
-                _ => PERIOD_SINGLE_US,
-            };
-            let gap = (ts - prev_ts) as f64;
-            // Gaps from dropped packets or pauses say nothing about the period.
-            if gap > 0.0 && gap < 10.0 * period {
-                self.ratios.push((gap / period) as f32);
-            }
-        }
-        self.prev = Some((ts, mode));
+/// The sensor of a capture, from its first data packets: the VLP-16 unless
+/// they are tagged 0x21 (the HDL-32E's id, which VLP-16 captures carry
+/// too), then the sensor whose packet period (single or dual return) the
+/// median gap between them is within 15 % of. `ProductPolicy::Any`: the
+/// VLP-16, unchecked. Records the scan cannot read are left to the decode
+/// that follows, which reports them.
+fn detect_model(
+    header: pcap::PcapHeader,
+    bytes: &[u8],
+    name: &Path,
+    opts: &PcapOptions,
+) -> Result<SensorModel, VelodyneError> {
+    if opts.products == ProductPolicy::Any {
+        return Ok(SensorModel::Vlp16);
     }
-
-    fn verify(mut self, path: &Path) -> Result<(), VelodyneError> {
-        let Some((packet, offset)) = self.first_0x21 else {
-            return Ok(());
+    let mut first: Option<(u64, u64)> = None;
+    let mut clock = Clock::default();
+    let mut prev: Option<i64> = None;
+    let mut gaps: Vec<(f64, bool)> = Vec::new();
+    let mut seen = 0;
+    for record in Records::new(header, bytes, name) {
+        let Ok(record) = record else { break };
+        let Kind::Data(payload) = classify(pcap::parse_frame(header.link_type, record.data), opts)
+        else {
+            continue;
         };
-        let refuse = |reason: String| {
-            Err(VelodyneError::UnsupportedProduct {
-                path: path.into(),
-                packet,
-                offset,
-                product: 0x21,
-                reason,
-            })
-        };
-        if self.ratios.len() < 2 {
-            return refuse(
-                "0x21 names the HDL-32E; a VLP-16 tagged 0x21 is recognised by its 1327 µs packet period, which needs at least 3 consecutive data packets (ProductPolicy::Any decodes it unchecked)".into(),
-            );
+        let product = payload[1205];
+        if seen == 0 && product != 0x21 {
+            return Ok(SensorModel::Vlp16);
         }
-        self.ratios.sort_by(f32::total_cmp);
-        let median = self.ratios[self.ratios.len() / 2];
-        if !(0.85..=1.15).contains(&median) {
-            return refuse(format!(
-                "0x21 names the HDL-32E, and the packets come {:.0}% of the VLP-16 period apart (1327 µs single, 664 µs dual return): this is not a VLP-16 (ProductPolicy::Any decodes it as one anyway)",
-                100.0 * median
-            ));
+        first.get_or_insert((record.index, record.offset));
+        let ts = clock.unwrap(u32::from_le_bytes([
+            payload[1200],
+            payload[1201],
+            payload[1202],
+            payload[1203],
+        ]));
+        let dual = payload[1204] == ReturnMode::Dual.byte();
+        if let Some(p) = prev {
+            gaps.push(((ts - p) as f64, dual));
         }
-        Ok(())
+        prev = Some(ts);
+        seen += 1;
+        if seen >= DETECT_PACKETS {
+            break;
+        }
+    }
+    let Some((packet, offset)) = first else {
+        // No data packet: the decode says so.
+        return Ok(SensorModel::Vlp16);
+    };
+    let refuse = |reason: String| {
+        Err(VelodyneError::UnsupportedProduct {
+            path: name.into(),
+            packet,
+            offset,
+            product: 0x21,
+            reason,
+        })
+    };
+    let ratio = |model: SensorModel| {
+        // Gaps from dropped packets or pauses say nothing about the period.
+        let mut r: Vec<f64> = gaps
+            .iter()
+            .map(|&(g, dual)| g / model.packet_period_us(dual))
+            .filter(|&r| r > 0.0 && r < 10.0)
+            .collect();
+        r.sort_by(f64::total_cmp);
+        r.get(r.len() / 2).copied()
+    };
+    let within = |r: Option<f64>| r.is_some_and(|r| (0.85..=1.15).contains(&r));
+    if gaps.len() < 2 {
+        return refuse(
+            "0x21 names the HDL-32E, and VLP-16 captures carry it too: the packet period tells them apart (1327 µs VLP-16, 553 µs HDL-32E, half in dual return), which needs at least 3 consecutive data packets (ProductPolicy::Any decodes it as a VLP-16 unchecked)".into(),
+        );
+    }
+    if within(ratio(SensorModel::Vlp16)) {
+        Ok(SensorModel::Vlp16)
+    } else if within(ratio(SensorModel::Hdl32e)) {
+        Ok(SensorModel::Hdl32e)
+    } else {
+        refuse(format!(
+            "0x21 names the HDL-32E, and VLP-16 captures carry it too, but these packets come {:.0} % of the HDL-32E's period apart (553 µs single, 276 µs dual return) and {:.0} % of the VLP-16's (1327 µs, 664 µs): neither sensor (ProductPolicy::Any decodes it as a VLP-16 anyway)",
+            100.0 * ratio(SensorModel::Hdl32e).unwrap_or(f64::NAN),
+            100.0 * ratio(SensorModel::Vlp16).unwrap_or(f64::NAN)
+        ))
     }
 }
 
@@ -402,8 +440,9 @@ fn wrap(az: f32) -> f32 {
 /// Accumulates firings into frames.
 struct Assembler {
     select: ReturnSelect,
-    cos_el: [f32; LASERS],
-    sin_el: [f32; LASERS],
+    model: SensorModel,
+    cos_el: [f32; MAX_LASERS],
+    sin_el: [f32; MAX_LASERS],
     done: Vec<(PointCloud, FrameStats)>,
     cloud: PointCloud,
     meta: Option<FrameStats>,
@@ -417,22 +456,18 @@ struct Assembler {
 }
 
 impl Assembler {
-    fn new(select: ReturnSelect) -> Self {
-        let mut cos_el = [0.0; LASERS];
-        let mut sin_el = [0.0; LASERS];
+    fn new(select: ReturnSelect, model: SensorModel) -> Self {
+        let mut cos_el = [0.0; MAX_LASERS];
+        let mut sin_el = [0.0; MAX_LASERS];
         // Laser id = ring: the campaign format indexes elevations by laser id.
-        for (l, e) in LidarSpec::vlp16()
-            .elevation_deg
-            .iter()
-            .take(LASERS)
-            .enumerate()
-        {
+        for (l, e) in model.elevation_deg().iter().take(MAX_LASERS).enumerate() {
             let (s, c) = e.to_radians().sin_cos();
             cos_el[l] = c as f32;
             sin_el[l] = s as f32;
         }
         Assembler {
             select,
+            model,
             cos_el,
             sin_el,
             done: Vec::new(),
@@ -507,17 +542,20 @@ impl Assembler {
         // rate of the one before.
         step[columns - 1] = step[columns - 2];
 
+        let m = self.model;
+        let (lasers, block_us) = (m.lasers(), m.block_period_us());
         for c in 0..columns {
             let base = f32::from(az[c * stride]);
-            for s in 0..2 {
-                let t_seq = c as f64 * BLOCK_PERIOD_US + s as f64 * SEQUENCE_PERIOD_US;
+            for s in 0..m.sequences_per_block() {
+                let t_seq = c as f64 * block_us + s as f64 * m.sequence_period_us();
                 self.firing(wrap(base + step[c] * 0.5 * s as f32), at.packet);
-                for l in 0..LASERS {
-                    let ch = s * LASERS + l;
-                    let t_us = t_seq + l as f64 * LASER_PERIOD_US;
-                    // Each laser fires 2.304 µs after the one before: its own
-                    // azimuth (VLP-16 manual, "precise azimuth").
-                    let a = wrap(base + step[c] * (t_us / BLOCK_PERIOD_US - c as f64) as f32);
+                for l in 0..lasers {
+                    let ch = s * lasers + l;
+                    let t_us = t_seq + l as f64 * m.laser_period_us();
+                    // Each laser fires a laser period after the one before:
+                    // its own azimuth (VLP-16 manual, "precise azimuth"; the
+                    // HDL-32E's likewise).
+                    let a = wrap(base + step[c] * (t_us / block_us - c as f64) as f32);
                     if stride == 1 {
                         self.emit(channel(payload, c, ch), l, a, t_us);
                     } else {

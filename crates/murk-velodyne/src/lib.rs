@@ -1,4 +1,4 @@
-//! Velodyne VLP-16 pcap decoding: a capture file in, one
+//! Velodyne VLP-16 and HDL-32E pcap decoding: a capture file in, one
 //! [`murk_types::PointCloud`] per revolution out.
 //!
 //! - [`read_pcap_file`] / [`decode_pcap`]: decode a classic libpcap capture
@@ -8,7 +8,8 @@
 //!   partial first/last frames).
 //! - [`PcapOptions`]: data port, which returns ([`ReturnSelect`]), what a
 //!   foreign packet does ([`ForeignPolicy`]), dropping partial frames,
-//!   which product ids are decoded ([`ProductPolicy`]).
+//!   which product ids are decoded ([`ProductPolicy`]); the sensor is told
+//!   by the product byte and, for 0x21, the packet period ([`SensorModel`]).
 //! - [`VelodyneError`]: every error names the file, the 1-based packet index
 //!   and the byte offset of its record.
 //! - [`synth`]: writers for synthetic captures (tests, benches, fixtures).
@@ -16,11 +17,15 @@
 //! # Geometry
 //!
 //! A data packet holds 12 blocks; each block an azimuth and two firing
-//! sequences of the 16 lasers. The second sequence's azimuth, and each
-//! laser's (lasers fire 2.304 µs apart, sequences 55.296 µs apart), are
-//! interpolated towards the next block's azimuth across the 360° wrap; the
-//! last block of a packet turns at the rate of the block before. Laser id is
-//! the ring, and its elevation ω comes from [`murk_types::LidarSpec::vlp16`].
+//! sequences of the 16 lasers (an HDL-32E block: one sequence of its 32).
+//! The second sequence's azimuth, and each laser's (VLP-16 lasers fire
+//! 2.304 µs apart, sequences 55.296 µs apart; HDL-32E lasers 1.152 µs
+//! apart, 46.08 µs a block), are interpolated towards the next block's
+//! azimuth across the 360° wrap; the last block of a packet turns at the
+//! rate of the block before. Laser id is the ring, and its elevation ω
+//! comes from [`SensorModel::elevation_deg`] (the VLP-16's is
+//! [`murk_types::LidarSpec::vlp16`]'s, the HDL-32E's
+//! [`murk_types::LidarSpec::hdl32e`]'s).
 //! The per-laser vertical offsets of the VLP-16 (≤ 11.2 mm) are not applied.
 //!
 //! **Frame convention.** The sensor measures azimuth α clockwise (seen from
@@ -64,6 +69,7 @@
 mod capture;
 mod decode;
 mod error;
+mod model;
 mod options;
 mod pcap;
 pub mod synth;
@@ -71,6 +77,7 @@ pub mod synth;
 pub use capture::{Capture, CaptureStats, FrameStats};
 pub use decode::{decode_pcap, decode_pcap_named, product_name, read_pcap_file};
 pub use error::VelodyneError;
+pub use model::SensorModel;
 pub use options::{
     DATA_PORT, ForeignPolicy, POSITION_PORT, PcapOptions, ProductPolicy, ReturnMode, ReturnSelect,
 };

@@ -21,7 +21,7 @@ pub const POSITION_PORT: u16 = 8308;
 /// | `on_foreign` | [`ForeignPolicy::Error`] | what a non-Velodyne packet does |
 /// | `min_frame_points` | `0` | a *partial* first/last frame with fewer points is dropped |
 /// | `keep_truncated_tail` | `false` | a capture cut inside its last record keeps the frames before the cut ([`crate::CaptureStats::truncated_tail`]) instead of failing |
-/// | `products` | [`ProductPolicy::Vlp16`] | which product-id bytes are decoded |
+/// | `products` | [`ProductPolicy::Known`] | which product-id bytes are decoded, as which sensor |
 ///
 /// Position packets are legitimate VLP-16 traffic and never need a flag;
 /// anything else in the capture (ARP, TCP, other UDP) is an error unless the
@@ -72,7 +72,7 @@ impl Default for PcapOptions {
             return_mode: ReturnSelect::AsRecorded,
             on_foreign: ForeignPolicy::Error,
             min_frame_points: 0,
-            products: ProductPolicy::Vlp16,
+            products: ProductPolicy::Known,
             keep_truncated_tail: false,
         }
     }
@@ -207,20 +207,23 @@ pub enum ForeignPolicy {
 
 /// Which data packets are decoded, by their product-id byte (byte 1205).
 ///
-/// Only the VLP-16 geometry (16 lasers at ±15°, two firing sequences per
-/// block) is implemented, so a packet from another model would decode to
-/// wrong points; it is refused with
+/// The VLP-16 geometry (16 lasers at ±15°, two firing sequences per block)
+/// and the HDL-32E's (32 lasers from −30.67° to +10.67°, one sequence per
+/// block) are implemented ([`crate::SensorModel`]); a packet from another
+/// model would decode to wrong points, so it is refused with
 /// [`crate::VelodyneError::UnsupportedProduct`] instead.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum ProductPolicy {
-    /// 0x22 (VLP-16) and 0x23 (Puck LITE, same lasers) are decoded. 0x21
-    /// nominally names the HDL-32E, but VLP-16 captures carrying it exist
-    /// (the real test capture of this repository is one): 0x21 packets are
-    /// decoded when their packet period is the VLP-16's (1327 µs single,
-    /// 664 µs dual return) and refused when it is not (an HDL-32E sends one
-    /// every 553 µs). Any other product byte is refused.
+    /// 0x22 (VLP-16) and 0x23 (Puck LITE, same lasers) are decoded as the
+    /// VLP-16. 0x21 names the HDL-32E, but VLP-16 captures carrying it
+    /// exist (the real test capture of this repository is one): 0x21
+    /// packets are decoded as the sensor whose packet period they keep —
+    /// the VLP-16's 1327 µs (664 µs dual return) or the HDL-32E's 553 µs
+    /// (276 µs) — and refused when they keep neither. Any other product
+    /// byte is refused, and so is a capture that mixes HDL-32E packets
+    /// with others.
     #[default]
-    Vlp16,
+    Known,
     /// Every product byte is decoded with the VLP-16 geometry, unchecked.
     Any,
 }

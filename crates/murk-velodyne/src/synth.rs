@@ -1,4 +1,4 @@
-//! Synthetic VLP-16 captures: the packet and pcap builders that this
+//! Synthetic VLP-16 and HDL-32E captures: the packet and pcap builders that this
 //! crate's tests, benches and fuzz seeds share, public so that fixtures and
 //! other crates' tests can write `.pcap` recordings too.
 //!
@@ -6,9 +6,9 @@
 //! VLP-16 manual's layout, so a test that round-trips through
 //! [`crate::decode_pcap`] checks the decoder against an independent writer.
 
-use crate::ReturnMode;
-use crate::decode::{BLOCK_LEN, BLOCK_PERIOD_US, BLOCKS, DATA_PAYLOAD_LEN, POSITION_PAYLOAD_LEN};
+use crate::decode::{BLOCK_LEN, BLOCKS, DATA_PAYLOAD_LEN, POSITION_PAYLOAD_LEN};
 use crate::options::{DATA_PORT, POSITION_PORT};
+use crate::{ReturnMode, SensorModel};
 
 /// One channel record: distance in 2 mm units (0 = no return) and
 /// calibrated reflectivity.
@@ -21,14 +21,15 @@ pub struct DataPacket {
     pub flags: [[u8; 2]; BLOCKS],
     /// Azimuth of each block, hundredths of a degree clockwise from forward.
     pub azimuths: [u16; BLOCKS],
-    /// 32 channel records per block: lasers 0–15 of the first firing
-    /// sequence, then lasers 0–15 of the second.
+    /// 32 channel records per block: VLP-16, lasers 0–15 of the first
+    /// firing sequence, then lasers 0–15 of the second; HDL-32E, lasers
+    /// 0–31 of its one sequence.
     pub channels: [[Channel; 32]; BLOCKS],
     /// µs since the top of the hour.
     pub timestamp_us: u32,
     /// Return-mode byte (0x37 strongest, 0x38 last, 0x39 dual).
     pub return_mode: u8,
-    /// Product-id byte (0x22 VLP-16).
+    /// Product-id byte (0x22 VLP-16, 0x21 HDL-32E).
     pub product: u8,
 }
 
@@ -213,6 +214,9 @@ pub struct Sweep {
     pub start_us: u32,
     /// Write a position packet after every this many data packets (0: never).
     pub position_every: usize,
+    /// The sensor: its timing, lasers and product byte (0x22 VLP-16, 0x21
+    /// HDL-32E).
+    pub model: SensorModel,
 }
 
 impl Default for Sweep {
@@ -224,6 +228,7 @@ impl Default for Sweep {
             mode: ReturnMode::Strongest,
             start_us: 0,
             position_every: 0,
+            model: SensorModel::Vlp16,
         }
     }
 }
@@ -231,19 +236,23 @@ impl Default for Sweep {
 impl Sweep {
     /// Azimuth step between firing columns, hundredths of a degree.
     pub fn column_step(&self) -> f64 {
-        self.rpm / 60.0 * 36000.0 * BLOCK_PERIOD_US * 1e-6
+        self.rpm / 60.0 * 36000.0 * self.model.block_period_us() * 1e-6
     }
 
     /// The data packets.
     pub fn data_packets(&self) -> Vec<DataPacket> {
         let dual = self.mode == ReturnMode::Dual;
         let columns = if dual { BLOCKS / 2 } else { BLOCKS };
-        let period = columns as f64 * BLOCK_PERIOD_US;
+        let period = columns as f64 * self.model.block_period_us();
+        let lasers = self.model.lasers();
         let step = self.column_step();
         (0..self.packets)
             .map(|n| {
                 let ts = (f64::from(self.start_us) + n as f64 * period).round() as u64;
                 let mut p = DataPacket::new(self.mode, (ts % 3_600_000_000) as u32);
+                if self.model == SensorModel::Hdl32e {
+                    p.product = 0x21;
+                }
                 for b in 0..BLOCKS {
                     let column = n * columns + if dual { b / 2 } else { b };
                     let az = (self.start_azimuth_deg * 100.0 + column as f64 * step).round();
@@ -251,7 +260,7 @@ impl Sweep {
                     p.azimuths[b] = az;
                     let second = dual && b % 2 == 1;
                     for ch in 0..32 {
-                        p.channels[b][ch] = scene(ch % 16, az, second);
+                        p.channels[b][ch] = scene(ch % lasers, az, second);
                     }
                 }
                 p

@@ -9,7 +9,7 @@ use murk_velodyne::synth::{
 };
 use murk_velodyne::{
     Capture, DATA_PORT, ForeignPolicy, POSITION_PORT, PcapOptions, ProductPolicy, ReturnMode,
-    ReturnSelect, VelodyneError, decode_pcap, read_pcap_file,
+    ReturnSelect, SensorModel, VelodyneError, decode_pcap, read_pcap_file,
 };
 
 /// Coordinates are compared to 0.1 mm.
@@ -67,8 +67,13 @@ fn by_ring(cloud: &PointCloud, laser: u16) -> usize {
 /// The point murk expects for a return at sensor azimuth `az_deg`
 /// (clockwise from forward), laser `laser`, distance `raw` × 2 mm.
 fn expected_xyz(raw: u16, laser: usize, az_deg: f64) -> [f32; 3] {
+    expected_xyz_of(&LidarSpec::vlp16(), raw, laser, az_deg)
+}
+
+/// [`expected_xyz`] for the lasers of `spec`.
+fn expected_xyz_of(spec: &LidarSpec, raw: u16, laser: usize, az_deg: f64) -> [f32; 3] {
     let r = f64::from(raw) * 0.002;
-    let w = LidarSpec::vlp16().elevation_deg[laser].to_radians();
+    let w = spec.elevation_deg[laser].to_radians();
     let a = az_deg.to_radians();
     [
         (r * w.cos() * a.cos()) as f32,
@@ -810,31 +815,133 @@ fn other_velodyne_products_are_refused_unless_asked() {
     assert_eq!(decode_pcap(&bytes, &any).unwrap().points(), 1);
 }
 
+/// Ten packets tagged 0x21, `period_us` apart, blocks turning 0.4° from 0°.
+fn tagged_0x21(period_us: u32) -> Vec<u8> {
+    let packets: Vec<DataPacket> = (0..10)
+        .map(|n| {
+            let mut p = turning(ReturnMode::Strongest, (n * 480) as u16, 40);
+            p.product = 0x21;
+            p.timestamp_us = 5000 + n * period_us;
+            p
+        })
+        .collect();
+    pcap_of_packets(&packets)
+}
+
 #[test]
-fn product_0x21_is_decoded_at_the_vlp16_period_and_refused_at_the_hdl32e_period() {
-    let tagged = |period_us: u32| {
-        let packets: Vec<DataPacket> = (0..10)
-            .map(|n| {
-                let mut p = turning(ReturnMode::Strongest, (n * 480) as u16, 40);
-                p.product = 0x21;
-                p.timestamp_us = 5000 + n * period_us;
-                p
-            })
-            .collect();
-        pcap_of_packets(&packets)
-    };
-    let c = decode(&tagged(1327));
+fn product_0x21_is_the_sensor_whose_packet_period_it_keeps() {
+    let c = decode(&tagged_0x21(1327));
     assert_eq!(c.stats.product_ids.get(&0x21), Some(&10));
-    let e = decode_err(&tagged(553), &PcapOptions::default());
+    assert_eq!(c.stats.sensor, Some(SensorModel::Vlp16));
+    let c = decode(&tagged_0x21(553));
+    assert_eq!(c.stats.sensor, Some(SensorModel::Hdl32e));
+    // Neither sensor's period: refused, naming the first 0x21 packet.
+    let e = decode_err(&tagged_0x21(900), &PcapOptions::default());
     assert!(
         matches!(
             &e,
             VelodyneError::UnsupportedProduct {
                 product: 0x21,
                 packet: 1,
+                reason,
                 ..
-            }
+            } if reason.contains("neither sensor")
         ),
+        "{e}"
+    );
+}
+
+/// HDL-32E packets (0x21 every 552.96 µs), blocks turning by `step`
+/// hundredths of a degree from 0°, without returns.
+fn hdl32e_packets(n: u32, step: u16) -> Vec<DataPacket> {
+    (0..n)
+        .map(|k| {
+            let mut p = turning(
+                ReturnMode::Strongest,
+                (k * 12 * u32::from(step)) as u16,
+                step,
+            );
+            p.product = 0x21;
+            p.timestamp_us = 5000 + (f64::from(k) * 552.96).round() as u32;
+            p
+        })
+        .collect()
+}
+
+#[test]
+fn hdl32e_returns_land_on_its_32_lasers_with_their_own_azimuth_and_time() {
+    // Packet 0, block 2 (at 0.32°, turning 0.16° a block): laser 0
+    // (−30.67°) at 10 m, laser 15 (0°) at 20 m, laser 31 (+10.67°) at 4 m.
+    let mut packets = hdl32e_packets(3, 16);
+    packets[0].channels[2][0] = (5000, 11);
+    packets[0].channels[2][15] = (10000, 33);
+    packets[0].channels[2][31] = (2000, 22);
+    let c = decode(&pcap_of_packets(&packets));
+    assert_eq!(c.stats.sensor, Some(SensorModel::Hdl32e));
+    assert_eq!(c.frames.len(), 1);
+    let cloud = &c.frames[0];
+    assert_eq!(cloud.len(), 3);
+    let hdl = LidarSpec::hdl32e();
+    let t = cloud.time.as_ref().expect("time column");
+    for (refl, laser, raw) in [(11.0, 0usize, 5000u16), (33.0, 15, 10000), (22.0, 31, 2000)] {
+        let i = cloud.intensity.iter().position(|&v| v == refl).unwrap();
+        assert_eq!(cloud.ring[i] as usize, laser);
+        // Laser l fires l × 1.152 µs into the 46.08 µs block.
+        let frac = laser as f64 * 1.152 / 46.08;
+        assert_point(
+            cloud,
+            i,
+            expected_xyz_of(&hdl, raw, laser, 0.32 + 0.16 * frac),
+        );
+        let want = (2.0 * 46.08 + laser as f64 * 1.152) * 1e-6;
+        assert!(
+            (t[i] - want as f32).abs() < TOL_S,
+            "laser {laser}: time {}",
+            t[i]
+        );
+    }
+}
+
+#[test]
+fn an_hdl32e_sweep_gives_its_turns_of_2170_firings() {
+    // 600 rpm: 0.1659° a block, 2170.1 blocks a turn; from 100°, 500
+    // packets (6,000 blocks) hold two full turns between partial ends.
+    let sweep = Sweep {
+        rpm: 600.0,
+        packets: 500,
+        start_azimuth_deg: 100.0,
+        model: SensorModel::Hdl32e,
+        ..Sweep::default()
+    };
+    let c = decode(&sweep.to_pcap());
+    assert_eq!(c.stats.sensor, Some(SensorModel::Hdl32e));
+    let f = &c.stats.frames;
+    assert_eq!(f.len(), 4, "{f:?}");
+    assert!(f[0].partial && f[3].partial && !f[1].partial && !f[2].partial);
+    for m in &f[1..3] {
+        assert!((2169..=2171).contains(&m.firings), "{m:?}");
+    }
+    assert_eq!(c.stats.points + c.stats.no_return, 500 * 384);
+    // Every laser is a ring at its own elevation.
+    let hdl = LidarSpec::hdl32e();
+    let cloud = &c.frames[1];
+    for laser in 0..32u16 {
+        let i = by_ring(cloud, laser);
+        let e = hdl.elevation_deg[laser as usize] as f32;
+        assert!((cloud.elevation_deg(i) - e).abs() < 1e-3, "laser {laser}");
+    }
+    // A VLP-16 sweep is still told as one.
+    let vlp = decode(&Sweep::default().to_pcap());
+    assert_eq!(vlp.stats.sensor, Some(SensorModel::Vlp16));
+}
+
+#[test]
+fn a_capture_mixing_hdl32e_packets_with_others_is_refused() {
+    let mut packets = hdl32e_packets(6, 16);
+    packets[4].product = 0x22;
+    let e = decode_err(&pcap_of_packets(&packets), &PcapOptions::default());
+    assert!(
+        matches!(&e, VelodyneError::UnsupportedProduct { product: 0x22, packet: 5, reason, .. } if reason.contains("one capture holds one sensor")),
         "{e}"
     );
 }
