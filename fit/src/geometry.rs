@@ -32,7 +32,9 @@
 
 pub use murk_types::firing::{MIN_DIFFS, azimuth_deg};
 use murk_types::firing::{MIN_STEP_DEG, circ_diff, median, mode_step};
-use murk_types::{LidarSpec, PointCloud, RingGeometry, SensorGeometry};
+use murk_types::{
+    LidarSpec, NEAR_POINT_M, NEAR_POINT_SHARE, PointCloud, RingGeometry, SensorGeometry,
+};
 
 /// Clear recordings the geometry is measured from (the first, in campaign
 /// order).
@@ -43,13 +45,6 @@ pub const MAX_FRAMES_PER_RECORDING: usize = 20;
 pub const STEP_TOLERANCE: f64 = 0.02;
 /// Disagreement of a ring elevation that is warned, degrees.
 pub const ELEVATION_TOLERANCE_DEG: f64 = 0.5;
-/// A point this near the sensor is no return of the scene (a LiDAR's
-/// housing and minimum range keep real returns farther): it is a firing
-/// without a return written as a point at the origin, or the vehicle's body.
-pub const NEAR_POINT_M: f64 = 0.3;
-/// Share of the measured points within [`NEAR_POINT_M`] that is warned when
-/// campaign.toml declares no `min_range_m`.
-pub const NEAR_POINT_SHARE: f64 = 0.005;
 /// Samples kept per ring and kind (differences, azimuths, elevations).
 const MAX_SAMPLES: usize = 200_000;
 

@@ -72,6 +72,10 @@ pub struct Applier {
     pub(crate) scan_covariates: std::collections::BTreeMap<String, murk_types::CovariateValue>,
 }
 
+/// Points of a scan checked for points at the origin (the first ones, in
+/// file order: a firing order that covers every ring).
+const NEAR_CHECK_POINTS: usize = 16_384;
+
 fn finite(x: f64) -> Option<f64> {
     x.is_finite().then_some(x)
 }
@@ -185,6 +189,21 @@ impl Applier {
         Ok(kept + passed)
     }
 
+    /// Without a minimum range, counts the scan's first
+    /// [`NEAR_CHECK_POINTS`] points and those within
+    /// [`murk_types::NEAR_POINT_M`] into `summary`
+    /// ([`ApplySummary::near_origin_warning`]).
+    fn check_near_origin(&self, cloud: &PointCloud, summary: &mut ApplySummary) {
+        if self.min_range_m.is_some() {
+            return;
+        }
+        let n = cloud.len().min(NEAR_CHECK_POINTS);
+        summary.near_origin_checked = n as u64;
+        summary.near_origin = (0..n)
+            .filter(|&i| f64::from(cloud.range(i)) < murk_types::NEAR_POINT_M)
+            .count() as u64;
+    }
+
     /// The scan's returns and each input point's flag (true: a return),
     /// when the sensor description says some of its points are not returns
     /// (nearer than `min_range_m`); `None` when every point is
@@ -248,7 +267,9 @@ impl Applier {
         Self::check_cloud(cloud, key)?;
         let mut mask = Vec::new();
         let Some((returns, is_return)) = self.returns_only(cloud) else {
-            return self.apply_returns(cloud, key, &mut mask);
+            let (out, mut summary) = self.apply_returns(cloud, key, &mut mask)?;
+            self.check_near_origin(cloud, &mut summary);
+            return Ok((out, summary));
         };
         let (out, mut summary) = self.apply_returns(&returns, key, &mut mask)?;
         let out = restore_non_returns(
@@ -337,7 +358,9 @@ impl Applier {
         replaced.clear();
         Self::check_cloud(cloud, key)?;
         let Some((returns, is_return)) = self.returns_only(cloud) else {
-            return self.marked_returns(cloud, key, mask, want_cloud, replaced);
+            let (out, mut summary) = self.marked_returns(cloud, key, mask, want_cloud, replaced)?;
+            self.check_near_origin(cloud, &mut summary);
+            return Ok((out, summary));
         };
         let (out, mut summary) = self.marked_returns(&returns, key, mask, want_cloud, replaced)?;
         let out = restore_non_returns(cloud, &is_return, mask, out, replaced, &mut summary);

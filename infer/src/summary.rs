@@ -64,6 +64,14 @@ pub struct ApplySummary {
     /// origin, the vehicle's body), written as they were and counted in
     /// `points_in` and `points_out` only.
     pub not_returns: u64,
+    /// Without a minimum range: of the scan's first 16,384 points (those
+    /// checked, `near_origin_checked`), the ones within
+    /// [`murk_types::NEAR_POINT_M`] of the sensor — no scene return comes
+    /// that close, so a share of them says the file keeps no-return firings
+    /// or the vehicle as points (0 with a minimum range).
+    pub near_origin: u64,
+    /// Points checked for `near_origin`.
+    pub near_origin_checked: u64,
     /// Anything the user should know (e.g. near-range returns not placed).
     pub warnings: Vec<String>,
 }
@@ -94,6 +102,8 @@ impl ApplySummary {
             range_noise_points: 0,
             attenuated_points: 0,
             not_returns: 0,
+            near_origin: 0,
+            near_origin_checked: 0,
             warnings: Vec::new(),
         }
     }
@@ -120,7 +130,25 @@ impl ApplySummary {
         self.range_noise_points += o.range_noise_points;
         self.attenuated_points += o.attenuated_points;
         self.not_returns += o.not_returns;
+        self.near_origin += o.near_origin;
+        self.near_origin_checked += o.near_origin_checked;
         self.warnings.extend(o.warnings.iter().cloned());
+    }
+
+    /// The warning that the points checked hold at least
+    /// [`murk_types::NEAR_POINT_SHARE`] within [`murk_types::NEAR_POINT_M`]
+    /// of the sensor (no minimum range was given), or `None`.
+    pub fn near_origin_warning(&self) -> Option<String> {
+        let share = self.near_origin as f64 / self.near_origin_checked.max(1) as f64;
+        (self.near_origin > 0 && share >= murk_types::NEAR_POINT_SHARE).then(|| {
+            format!(
+                "{} of the {} points checked ({:.1} %) lie within {} m of the sensor — no scene return comes that close: no-return firings written as points (nuScenes, Ouster) or the vehicle itself; give the minimum range (--min-range, min_range_m; nuScenes' tools use 1 m) so that they are written as they were and their rays stay open",
+                self.near_origin,
+                self.near_origin_checked,
+                share * 100.0,
+                murk_types::NEAR_POINT_M
+            )
+        })
     }
 
     /// Fraction of input points kept unchanged by vanishing (1 for an empty

@@ -570,3 +570,64 @@ fn a_null_slope_from_the_edge_test_is_refused_with_its_reason() {
     let o = run("rain", "60", "rain");
     assert!(o.status.success(), "{}", text(&o.stderr));
 }
+
+/// A scan that keeps its no-return firings as points at the origin (as
+/// Ouster and nuScenes files do): without a minimum range `murk apply`
+/// warns, once, naming the flag; with `--min-range` those points come out
+/// as they went in, and the summary counts them.
+#[test]
+fn points_at_the_origin_are_warned_and_passed_through_with_min_range() {
+    let (dir, table, _) = setup();
+    let input = dir.path().join("zeros");
+    std::fs::create_dir_all(&input).unwrap();
+    let mut c = PointCloud::with_capacity(120);
+    for r in 1..=50 {
+        c.push(r as f32, 0.0, 0.0, 5.0, 0);
+        c.push(0.0, r as f32, 0.0, 50.0, 1);
+        if r % 5 == 0 {
+            c.push(0.0, 0.0, 0.0, 0.0, 0);
+        }
+    }
+    write_cloud(&input.join("z.pcd"), &c, PointFormat::Pcd).unwrap();
+    let run = |extra: &[&str], out: &str| {
+        let out = dir.path().join(out);
+        let o = murk(
+            &[
+                &[
+                    "apply",
+                    "--coefficients",
+                    table.to_str().unwrap(),
+                    "--weather",
+                    "fog",
+                    "--mor",
+                    "40",
+                    "--range-noise",
+                    "0.05",
+                ],
+                extra,
+                &[input.to_str().unwrap(), "--out", out.to_str().unwrap()],
+            ]
+            .concat(),
+        );
+        assert!(o.status.success(), "{}", text(&o.stderr));
+        let cloud = read_cloud(&out.join("z.pcd"), &ReadOptions::default()).unwrap();
+        (text(&o.stdout), text(&o.stderr), cloud)
+    };
+    let (_, err, _) = run(&[], "plain");
+    assert_eq!(
+        err.matches("10 of the 110 points checked").count(),
+        1,
+        "{err}"
+    );
+    assert!(err.contains("--min-range"), "{err}");
+    let (out, err, cloud) = run(&["--min-range", "0.5"], "declared");
+    assert!(!err.contains("points checked"), "{err}");
+    assert!(
+        out.contains("10 points nearer than the minimum range"),
+        "{out}"
+    );
+    let zeros = (0..cloud.len())
+        .filter(|&i| cloud.x[i] == 0.0 && cloud.y[i] == 0.0 && cloud.z[i] == 0.0)
+        .count();
+    assert_eq!(zeros, 10);
+}

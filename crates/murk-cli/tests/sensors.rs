@@ -321,6 +321,15 @@ fn an_ouster_like_sensor_works_end_to_end() {
         "{:?}",
         u.lidar.warnings
     );
+    // `murk campaign summary` says it before any fit.
+    let summary = ok(
+        &murk(&["campaign", "summary", s(&camp)]),
+        "campaign summary",
+    );
+    assert!(
+        summary.contains("within 0.3 m") && summary.contains("min_range_m"),
+        "{summary}"
+    );
     let toml = std::fs::read_to_string(camp.join("campaign.toml")).unwrap();
     let toml = toml.replacen("[lidar]", "[lidar]\nmin_range_m = 0.3", 1);
     std::fs::write(camp.join("campaign.toml"), toml).unwrap();

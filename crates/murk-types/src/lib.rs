@@ -75,7 +75,9 @@ pub use extension::{
 };
 pub use format::{BinLayout, PointFormat};
 pub use intensity::IntensityScale;
-pub use lidar::{HDL32E_ELEVATION_DEG, LidarSpec, VLP16_ELEVATION_DEG};
+pub use lidar::{
+    HDL32E_ELEVATION_DEG, LidarSpec, NEAR_POINT_M, NEAR_POINT_SHARE, VLP16_ELEVATION_DEG,
+};
 pub use table::{
     ClearCoefficients, CoefficientTable, CountLaw, CountLawChoice, CountUnit, EdgeTest,
     ExcludedRecording, Gaussian, InputDigest, Interval, LackOfFit, LawChoice, MorBin, NoiseLaw,

@@ -62,6 +62,16 @@ pub const VLP16_ELEVATION_DEG: [f64; 16] = [
     -15.0, 1.0, -13.0, 3.0, -11.0, 5.0, -9.0, 7.0, -7.0, 9.0, -5.0, 11.0, -3.0, 13.0, -1.0, 15.0,
 ];
 
+/// A point this near the sensor (metres) is no return of the scene — a
+/// LiDAR's housing and minimum range keep real returns farther: it is a
+/// firing without a return written as a point at the origin (nuScenes,
+/// Ouster), or the vehicle's body. Where no [`LidarSpec::min_range_m`] is
+/// declared, fit and apply warn when at least [`NEAR_POINT_SHARE`] of the
+/// points they check lie this near.
+pub const NEAR_POINT_M: f64 = 0.3;
+/// Share of points within [`NEAR_POINT_M`] that fit and apply warn about.
+pub const NEAR_POINT_SHARE: f64 = 0.005;
+
 /// HDL-32E laser elevations by laser id (degrees): the even lasers from
 /// −30.67° and the odd ones from −9.33° up by 4/3°, interleaved (the
 /// sensor's own calibration).

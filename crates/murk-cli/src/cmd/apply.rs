@@ -271,6 +271,9 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     for w in &report.totals.warnings {
         errln!("murk: warning: {w}");
     }
+    if let Some(w) = report.totals.near_origin_warning() {
+        errln!("murk: warning: {w}");
+    }
     print_summary(&report.totals, &report.model, &report.files, &a.out);
     Ok(())
 }
