@@ -43,6 +43,21 @@ const TABLE: &str = r#"{
   "provenance": { "tool": "test", "inputs_sha256": "", "parameters": {} }
 }"#;
 
+/// Two walls, one point per metre 1–50 m, reflectivity 5 (ring 0) and 50
+/// (ring 1); with `origin_every` > 0, a point at the origin after every
+/// `origin_every` metres.
+fn walls(origin_every: usize) -> PointCloud {
+    let mut a = PointCloud::with_capacity(120);
+    for r in 1..=50 {
+        a.push(r as f32, 0.0, 0.0, 5.0, 0);
+        a.push(0.0, r as f32, 0.0, 50.0, 1);
+        if origin_every > 0 && r % origin_every == 0 {
+            a.push(0.0, 0.0, 0.0, 0.0, 0);
+        }
+    }
+    a
+}
+
 /// A table file and a folder `in/` with `a.pcd` (50 m wall, one point per
 /// metre 1–50 m, reflectivity 5 and 50) and `b.bin`, plus `readme.txt`.
 fn setup() -> (tempfile::TempDir, PathBuf, PathBuf) {
@@ -51,11 +66,7 @@ fn setup() -> (tempfile::TempDir, PathBuf, PathBuf) {
     std::fs::write(&table, TABLE).unwrap();
     let input = dir.path().join("in");
     std::fs::create_dir_all(&input).unwrap();
-    let mut a = PointCloud::with_capacity(100);
-    for r in 1..=50 {
-        a.push(r as f32, 0.0, 0.0, 5.0, 0);
-        a.push(0.0, r as f32, 0.0, 50.0, 1);
-    }
+    let a = walls(0);
     write_cloud(&input.join("a.pcd"), &a, PointFormat::Pcd).unwrap();
     let mut b = a.clone();
     b.to_scale(murk_types::IntensityScale::KITTI);
@@ -580,15 +591,7 @@ fn points_at_the_origin_are_warned_and_passed_through_with_min_range() {
     let (dir, table, _) = setup();
     let input = dir.path().join("zeros");
     std::fs::create_dir_all(&input).unwrap();
-    let mut c = PointCloud::with_capacity(120);
-    for r in 1..=50 {
-        c.push(r as f32, 0.0, 0.0, 5.0, 0);
-        c.push(0.0, r as f32, 0.0, 50.0, 1);
-        if r % 5 == 0 {
-            c.push(0.0, 0.0, 0.0, 0.0, 0);
-        }
-    }
-    write_cloud(&input.join("z.pcd"), &c, PointFormat::Pcd).unwrap();
+    write_cloud(&input.join("z.pcd"), &walls(5), PointFormat::Pcd).unwrap();
     let run = |extra: &[&str], out: &str| {
         let out = dir.path().join(out);
         let o = murk(
