@@ -936,6 +936,43 @@ fn an_hdl32e_sweep_gives_its_turns_of_2170_firings() {
 }
 
 #[test]
+fn hdl32e_dual_return_packets_are_told_by_their_period_and_paired() {
+    // Dual return: block pairs share an azimuth, packets every 276.48 µs.
+    let packets: Vec<DataPacket> = (0..4u32)
+        .map(|k| {
+            let mut p = turning(ReturnMode::Dual, (k * 6 * 16) as u16, 16);
+            p.product = 0x21;
+            p.timestamp_us = 5000 + (f64::from(k) * 276.48).round() as u32;
+            p
+        })
+        .collect();
+    let mut packets = packets;
+    // Pair 1 (blocks 2, 3 at 0.16°): laser 20 (−17.33°) last at 12 m,
+    // strongest at 7 m.
+    packets[0].channels[2][20] = (6000, 15);
+    packets[0].channels[3][20] = (3500, 90);
+    let c = decode(&pcap_of_packets(&packets));
+    assert_eq!(c.stats.sensor, Some(SensorModel::Hdl32e));
+    assert_eq!(c.stats.return_mode(), Some(ReturnMode::Dual));
+    let cloud = &c.frames[0];
+    assert_eq!(cloud.len(), 2);
+    assert_eq!(cloud.ring, vec![20, 20]);
+    let hdl = LidarSpec::hdl32e();
+    let az = 0.16 + 0.16 * 20.0 * 1.152 / 46.08;
+    for (refl, raw) in [(15.0, 6000u16), (90.0, 3500)] {
+        let i = cloud.intensity.iter().position(|&v| v == refl).unwrap();
+        assert_point(cloud, i, expected_xyz_of(&hdl, raw, 20, az));
+    }
+    // The same packets at the VLP-16's dual period are a VLP-16's.
+    let mut vlp = packets.clone();
+    for (k, p) in vlp.iter_mut().enumerate() {
+        p.timestamp_us = 5000 + (k as f64 * 663.552).round() as u32;
+    }
+    let c = decode(&pcap_of_packets(&vlp));
+    assert_eq!(c.stats.sensor, Some(SensorModel::Vlp16));
+}
+
+#[test]
 fn a_capture_mixing_hdl32e_packets_with_others_is_refused() {
     let mut packets = hdl32e_packets(6, 16);
     packets[4].product = 0x22;
