@@ -33,7 +33,7 @@
 pub use murk_types::firing::{MIN_DIFFS, azimuth_deg};
 use murk_types::firing::{MIN_STEP_DEG, circ_diff, median, mode_step};
 use murk_types::{
-    LidarSpec, NEAR_POINT_M, NEAR_POINT_SHARE, PointCloud, RingGeometry, SensorGeometry,
+    LidarSpec, NEAR_POINT_M, PointCloud, RingGeometry, SensorGeometry, near_point_share,
 };
 
 /// Clear recordings the geometry is measured from (the first, in campaign
@@ -338,21 +338,21 @@ pub fn warnings(geometry: &SensorGeometry, declared: &LidarSpec) -> Vec<String> 
 
 impl GeometryAcc {
     /// The warning that the measured scans hold points no scene return
-    /// could give (at least [`NEAR_POINT_SHARE`] of them within
+    /// could give (at least [`murk_types::NEAR_POINT_SHARE`] of them within
     /// [`NEAR_POINT_M`]) while `declared` has no `min_range_m`: left in,
     /// each such point's cell reads as "lost" whenever the weather puts a
     /// return of its own on that ray, which no vanishing edge explains.
     pub fn near_points_warning(&self, declared: &LidarSpec) -> Option<String> {
-        let share = self.near_points as f64 / self.points.max(1) as f64;
-        (declared.min_range_m.is_none() && self.near_points > 0 && share >= NEAR_POINT_SHARE)
-            .then(|| {
-                format!(
-                    "near points: {} of the {} points measured ({:.1} %) lie within {NEAR_POINT_M} m of the sensor — no scene return comes that close: they are firings without a return written as points (nuScenes, Ouster) or the vehicle itself; declare min_range_m under [lidar] in campaign.toml (nuScenes' tools use 1 m) so that murk leaves them out, or the weather's returns on those rays read as losses at the origin",
-                    self.near_points,
-                    self.points,
-                    share * 100.0
-                )
-            })
+        if declared.min_range_m.is_some() {
+            return None;
+        }
+        let share = near_point_share(self.near_points, self.points)?;
+        Some(format!(
+            "near points: {} of the {} points measured ({:.1} %) lie within {NEAR_POINT_M} m of the sensor — no scene return comes that close: they are firings without a return written as points (nuScenes, Ouster) or the vehicle itself; declare min_range_m under [lidar] in campaign.toml (nuScenes' tools use 1 m) so that murk leaves them out, or the weather's returns on those rays read as losses at the origin",
+            self.near_points,
+            self.points,
+            share * 100.0
+        ))
     }
 }
 

@@ -272,15 +272,9 @@ impl Applier {
             return Ok((out, summary));
         };
         let (out, mut summary) = self.apply_returns(&returns, key, &mut mask)?;
-        let out = restore_non_returns(
-            cloud,
-            &is_return,
-            &mut mask,
-            Some(out),
-            &mut [],
-            &mut summary,
-        );
-        Ok((out.unwrap_or_else(|| cloud.clone()), summary))
+        pass_through(&is_return, &mut mask, &mut summary);
+        let out = merge_non_returns(cloud, &is_return, &mask, out, &mut []);
+        Ok((out, summary))
     }
 
     /// [`Applier::apply`] on a checked cloud of returns only; `mask` gets
@@ -363,7 +357,8 @@ impl Applier {
             return Ok((out, summary));
         };
         let (out, mut summary) = self.marked_returns(&returns, key, mask, want_cloud, replaced)?;
-        let out = restore_non_returns(cloud, &is_return, mask, out, replaced, &mut summary);
+        pass_through(&is_return, mask, &mut summary);
+        let out = out.map(|o| merge_non_returns(cloud, &is_return, mask, o, replaced));
         Ok((out, summary))
     }
 
@@ -509,28 +504,31 @@ fn scatter_mask(is_return: &[bool], mask: &mut Vec<u8>) -> u64 {
     passed
 }
 
-/// Puts the points of `cloud` that are not returns back in their places:
-/// `mask` (the fate of each return) becomes every input point's, `out` (the
-/// kept returns in order, then the added near returns) gets the others
-/// between them as they were, the output indices in `replaced` move with
-/// them, and `summary` counts them in and out.
-fn restore_non_returns(
-    cloud: &PointCloud,
-    is_return: &[bool],
-    mask: &mut Vec<u8>,
-    out: Option<PointCloud>,
-    replaced: &mut [usize],
-    summary: &mut ApplySummary,
-) -> Option<PointCloud> {
+/// Widens `mask` to every input point (those that are not returns kept)
+/// and counts those in and out of `summary`.
+fn pass_through(is_return: &[bool], mask: &mut Vec<u8>, summary: &mut ApplySummary) {
     let passed = scatter_mask(is_return, mask);
     summary.points_in += passed;
     summary.points_out += passed;
     summary.not_returns = passed;
-    let out = out?;
-    let mut merged = PointCloud::with_capacity(out.len() + passed as usize);
+}
+
+/// `out` (the kept returns in order, then the added near returns) with the
+/// points of `cloud` that are not returns put back in their places as they
+/// were; `mask` is every input point's fate ([`pass_through`]), and the
+/// output indices in `replaced` move with the points.
+fn merge_non_returns(
+    cloud: &PointCloud,
+    is_return: &[bool],
+    mask: &[u8],
+    out: PointCloud,
+    replaced: &mut [usize],
+) -> PointCloud {
+    let passed = cloud.len() - is_return.iter().filter(|&&r| r).count();
+    let mut merged = PointCloud::with_capacity(out.len() + passed);
     merged.intensity_scale = out.intensity_scale;
     if out.time.is_some() {
-        merged.time = Some(Vec::with_capacity(out.len() + passed as usize));
+        merged.time = Some(Vec::with_capacity(out.len() + passed));
     }
     let push = |dst: &mut PointCloud, src: &PointCloud, i: usize| {
         dst.x.push(src.x[i]);
@@ -560,5 +558,5 @@ fn restore_non_returns(
     for r in replaced.iter_mut() {
         *r = at[*r];
     }
-    Some(merged)
+    merged
 }

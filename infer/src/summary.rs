@@ -139,16 +139,14 @@ impl ApplySummary {
     /// [`murk_types::NEAR_POINT_SHARE`] within [`murk_types::NEAR_POINT_M`]
     /// of the sensor (no minimum range was given), or `None`.
     pub fn near_origin_warning(&self) -> Option<String> {
-        let share = self.near_origin as f64 / self.near_origin_checked.max(1) as f64;
-        (self.near_origin > 0 && share >= murk_types::NEAR_POINT_SHARE).then(|| {
-            format!(
-                "{} of the {} points checked ({:.1} %) lie within {} m of the sensor — no scene return comes that close: no-return firings written as points (nuScenes, Ouster) or the vehicle itself; give the minimum range (--min-range, min_range_m; nuScenes' tools use 1 m) so that they are written as they were and their rays stay open",
-                self.near_origin,
-                self.near_origin_checked,
-                share * 100.0,
-                murk_types::NEAR_POINT_M
-            )
-        })
+        let share = murk_types::near_point_share(self.near_origin, self.near_origin_checked)?;
+        Some(format!(
+            "{} of the {} points checked ({:.1} %) lie within {} m of the sensor — no scene return comes that close: no-return firings written as points (nuScenes, Ouster) or the vehicle itself; give the minimum range (--min-range, min_range_m; nuScenes' tools use 1 m) so that they are written as they were and their rays stay open",
+            self.near_origin,
+            self.near_origin_checked,
+            share * 100.0,
+            murk_types::NEAR_POINT_M
+        ))
     }
 
     /// Fraction of input points kept unchanged by vanishing (1 for an empty

@@ -170,10 +170,7 @@ fn an_hdl64_like_sensor_works_end_to_end() {
 /// every 0.8° at a 0.13° phase, 24 recordings.
 fn hdl64(c: &mut GeneratorConfig, format: &str) {
     c.lidar.model = "HDL64".into();
-    c.lidar.elevation_deg = (0..32)
-        .map(|k| 2.0 - k as f64 / 3.0)
-        .chain((0..32).map(|k| -8.83 - k as f64 * 0.5))
-        .collect();
+    c.lidar.elevation_deg = semi_real::hdl64e_elevation_deg();
     c.lidar.azimuth_resolution_deg = 0.8;
     c.sensor.azimuth_phase_deg = 0.13;
     c.campaign.recordings = 24;

@@ -77,6 +77,7 @@ pub use format::{BinLayout, PointFormat};
 pub use intensity::IntensityScale;
 pub use lidar::{
     HDL32E_ELEVATION_DEG, LidarSpec, NEAR_POINT_M, NEAR_POINT_SHARE, VLP16_ELEVATION_DEG,
+    near_point_share,
 };
 pub use table::{
     ClearCoefficients, CoefficientTable, CountLaw, CountLawChoice, CountUnit, EdgeTest,

@@ -72,6 +72,14 @@ pub const NEAR_POINT_M: f64 = 0.3;
 /// Share of points within [`NEAR_POINT_M`] that fit and apply warn about.
 pub const NEAR_POINT_SHARE: f64 = 0.005;
 
+/// The share `near / checked` of points within [`NEAR_POINT_M`] when it is
+/// worth a warning (at least [`NEAR_POINT_SHARE`], and some), else `None`:
+/// the one rule fit and apply warn by.
+pub fn near_point_share(near: u64, checked: u64) -> Option<f64> {
+    let share = near as f64 / checked.max(1) as f64;
+    (near > 0 && share >= NEAR_POINT_SHARE).then_some(share)
+}
+
 /// HDL-32E laser elevations by laser id (degrees): the even lasers from
 /// −30.67° and the odd ones from −9.33° up by 4/3°, interleaved (the
 /// sensor's own calibration).
