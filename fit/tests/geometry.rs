@@ -385,15 +385,30 @@ fn recordings_of_different_lengths_give_the_slopes() {
     }
 }
 
-/// Clear recordings as HDL-32E captures (`.pcap` of packets tagged 0x21 at
-/// its 553 µs period, written field by field by `murk_velodyne::synth`):
-/// murk decodes them on the HDL-32E's 32 lasers and the fit measures the
-/// unit's own step (0.166° at 600 rpm) and each laser's elevation. The
-/// same recordings with the elevations declared in ascending order, not by
-/// laser id (a datasheet's table copied as it is printed), are warned.
+/// Clear recordings as HDL-32E and VLP-32C captures (`.pcap` of packets
+/// tagged 0x21 at the HDL-32E's 553 µs period, and 0x28, written field by
+/// field by `murk_velodyne::synth`): murk decodes them on each sensor's 32
+/// lasers and the fit measures the unit's own step (0.166° and 0.199° at
+/// 600 rpm) and each laser's elevation — the VLP-32C's lasers also sit at
+/// horizontal offsets of ±1.4° and ±4.2°, which each ring's phase takes.
+/// The same recordings with the elevations declared in ascending order,
+/// not by laser id (a datasheet's table copied as it is printed), are
+/// warned.
 #[test]
-fn hdl32e_pcap_recordings_are_measured_on_their_own_lasers() {
-    let hdl = murk_types::LidarSpec::hdl32e();
+fn hdl32e_and_vlp32c_pcap_recordings_are_measured_on_their_own_lasers() {
+    use murk_velodyne::SensorModel;
+    for (model, spec) in [
+        (SensorModel::Hdl32e, murk_types::LidarSpec::hdl32e()),
+        (SensorModel::Vlp32c, murk_types::LidarSpec::vlp32c()),
+    ] {
+        pcap_recordings_are_measured_on_their_own_lasers(model, &spec);
+    }
+}
+
+fn pcap_recordings_are_measured_on_their_own_lasers(
+    model: murk_velodyne::SensorModel,
+    spec: &murk_types::LidarSpec,
+) {
     let write = |elevations: &[f64]| {
         let dir = tempfile::tempdir().unwrap();
         let d = dir.path();
@@ -402,8 +417,10 @@ fn hdl32e_pcap_recordings_are_measured_on_their_own_lasers() {
         std::fs::write(
             d.join("campaign.toml"),
             format!(
-                "name = \"hdl32e\"\nrules = \"pdd-2022-2023\"\n[lidar]\nmodel = \"HDL32E\"\nelevation_deg = [{}]\nazimuth_resolution_deg = 0.166\n",
-                el.join(", ")
+                "name = \"pcap\"\nrules = \"pdd-2022-2023\"\n[lidar]\nmodel = \"{}\"\nelevation_deg = [{}]\nazimuth_resolution_deg = {}\n",
+                spec.model,
+                el.join(", "),
+                spec.azimuth_resolution_deg
             ),
         )
         .unwrap();
@@ -413,9 +430,9 @@ fn hdl32e_pcap_recordings_are_measured_on_their_own_lasers() {
         for k in 0..3u32 {
             let sweep = murk_velodyne::synth::Sweep {
                 rpm: 600.0,
-                packets: 400,
+                packets: (400.0 * 46.08 / model.block_period_us()).round() as usize,
                 start_azimuth_deg: 40.0 * f64::from(k),
-                model: murk_velodyne::SensorModel::Hdl32e,
+                model,
                 ..murk_velodyne::synth::Sweep::default()
             };
             std::fs::write(d.join("lidar").join(format!("r{k}.pcap")), sweep.to_pcap()).unwrap();
@@ -429,30 +446,39 @@ fn hdl32e_pcap_recordings_are_measured_on_their_own_lasers() {
         let got = murk_fit::observe::measure_geometry(&inputs).unwrap();
         (dir, got)
     };
-    let (_d, (g, warnings)) = write(&hdl.elevation_deg);
-    assert!(warnings.is_empty(), "{warnings:?}");
+    let name = model.name();
+    let (_d, (g, warnings)) = write(&spec.elevation_deg);
+    eprintln!(
+        "{name}: step {:.4}°, phases {:?}",
+        g.azimuth_step_deg,
+        g.rings
+            .iter()
+            .map(|r| (r.azimuth_phase_deg * 1000.0).round() / 1000.0)
+            .collect::<Vec<_>>()
+    );
+    assert!(warnings.is_empty(), "{name}: {warnings:?}");
     assert_eq!(g.source, "measured");
     assert_eq!(g.rings.len(), 32);
-    let step = 360.0 / (360.0 / (10.0f64 * 360.0 * 46.08e-6)).round();
+    let step = 360.0 / (360.0 / (10.0f64 * 360.0 * model.block_period_us() * 1e-6)).round();
     assert!(
         (g.azimuth_step_deg / step - 1.0).abs() < 0.005,
-        "step {} against {step}",
+        "{name}: step {} against {step}",
         g.azimuth_step_deg
     );
     for r in &g.rings {
-        let want = hdl.elevation_deg[r.ring as usize];
+        let want = spec.elevation_deg[r.ring as usize];
         let e = r.elevation_deg.expect("measured");
         assert!(
             (e - want).abs() < 0.01,
-            "ring {}: {e} against {want}",
+            "{name} ring {}: {e} against {want}",
             r.ring
         );
     }
-    let mut sorted = hdl.elevation_deg.clone();
+    let mut sorted = spec.elevation_deg.clone();
     sorted.sort_by(f64::total_cmp);
     let (_d, (_, warnings)) = write(&sorted);
     assert!(
         warnings.iter().any(|w| w.starts_with("ring elevations")),
-        "{warnings:?}"
+        "{name}: {warnings:?}"
     );
 }

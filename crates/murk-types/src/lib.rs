@@ -76,8 +76,8 @@ pub use extension::{
 pub use format::{BinLayout, PointFormat};
 pub use intensity::IntensityScale;
 pub use lidar::{
-    HDL32E_ELEVATION_DEG, LidarSpec, NEAR_POINT_M, NEAR_POINT_SHARE, VLP16_ELEVATION_DEG,
-    near_point_share,
+    HDL32E_ELEVATION_DEG, LidarSpec, NEAR_POINT_M, NEAR_POINT_SHARE, PUCK_HI_RES_ELEVATION_DEG,
+    VLP16_ELEVATION_DEG, VLP32C_ELEVATION_DEG, near_point_share,
 };
 pub use table::{
     ClearCoefficients, CoefficientTable, CountLaw, CountLawChoice, CountUnit, EdgeTest,

@@ -89,7 +89,36 @@ pub const HDL32E_ELEVATION_DEG: [f64; 32] = [
     8.0, -12.0, 9.33, -10.67, 10.67,
 ];
 
+/// VLP-32C laser elevations by laser id (degrees), from its default
+/// calibration: 32 lasers from −25° to +15°, densest (1/3° apart) around
+/// the horizon, in the order the packet holds them.
+pub const VLP32C_ELEVATION_DEG: [f64; 32] = [
+    -25.0, -1.0, -1.667, -15.639, -11.31, 0.0, -0.667, -8.843, -7.254, 0.333, -0.333, -6.148,
+    -5.333, 1.333, 0.667, -4.0, -4.667, 1.667, 1.0, -3.667, -3.333, 3.333, 2.333, -2.667, -3.0,
+    7.0, 4.667, -2.333, -2.0, 15.0, 10.333, -1.333,
+];
+
+/// Puck Hi-Res (VLP-16 Hi-Res) laser elevations by laser id (degrees): the
+/// VLP-16's lasers spread over ±10° instead of ±15°, 4/3° apart.
+pub const PUCK_HI_RES_ELEVATION_DEG: [f64; 16] = [
+    -10.0, 0.667, -8.667, 2.0, -7.333, 3.333, -6.0, 4.667, -4.667, 6.0, -3.333, 7.333, -2.0, 8.667,
+    -0.667, 10.0,
+];
+
 impl LidarSpec {
+    /// The Velodyne VLP-32C at 10 Hz (a firing every 0.2°: 55.296 µs a
+    /// firing sequence). Its lasers also sit at horizontal offsets of
+    /// ±1.4° and ±4.2° from the firing azimuth; a decoder puts each return
+    /// at its laser's own azimuth, and fit measures each ring's phase.
+    pub fn vlp32c() -> Self {
+        LidarSpec {
+            model: "VLP32C".into(),
+            elevation_deg: VLP32C_ELEVATION_DEG.to_vec(),
+            max_range_m: 200.0,
+            ..LidarSpec::vlp16()
+        }
+    }
+
     /// The Velodyne HDL-32E at 10 Hz (a firing every 0.166°: 2,170 a
     /// turn).
     pub fn hdl32e() -> Self {

@@ -1,6 +1,6 @@
 //! From pcap bytes to frames: packet classification, telling the sensor
-//! (VLP-16 or HDL-32E, [`SensorModel`]), data-packet decoding, azimuth
-//! interpolation and frame splitting.
+//! (VLP-16, Puck Hi-Res, HDL-32E or VLP-32C, [`SensorModel`]), data-packet
+//! decoding, azimuth interpolation and frame splitting.
 
 use std::path::Path;
 
@@ -20,10 +20,8 @@ pub const POSITION_PAYLOAD_LEN: usize = 512;
 pub const BLOCKS: usize = 12;
 /// Bytes per block: flag, azimuth, 32 channel records of 3 bytes.
 pub const BLOCK_LEN: usize = 100;
-/// Most lasers of a sensor this crate decodes (the HDL-32E's).
+/// Most lasers of a sensor this crate decodes (the HDL-32E's and VLP-32C's).
 const MAX_LASERS: usize = 32;
-/// Distance unit of a channel record, metres.
-pub const DISTANCE_UNIT_M: f32 = 0.002;
 
 /// The largest azimuth step accepted between two consecutive blocks (dual:
 /// block pairs), hundredths of a degree: 2.5 times the 0.8° of a VLP-16 at
@@ -240,15 +238,16 @@ fn check_data(
         ))
     })?;
     if opts.products == ProductPolicy::Known {
-        let reason = if !matches!(product, 0x21..=0x23) {
+        let reason = if SensorModel::from_product(product).is_none() {
             Some(format!(
-                "{} packets are not a geometry murk decodes; only 0x22 (VLP-16), 0x23 (Puck LITE) and 0x21 (HDL-32E, or a VLP-16 tagged so, told by the packet period) are (ProductPolicy::Any decodes any product as a VLP-16)",
+                "{} packets are not a geometry murk decodes; only 0x22 (VLP-16), 0x23 (Puck LITE), 0x24 (Puck Hi-Res), 0x28 (VLP-32C) and 0x21 (HDL-32E, or a VLP-16 tagged so, told by the packet period) are (ProductPolicy::Any decodes any product as a VLP-16)",
                 product_name(product)
             ))
-        } else if model == SensorModel::Hdl32e && product != 0x21 {
+        } else if !model.accepts_product(product) {
             Some(format!(
-                "{} packets in a capture of HDL-32E packets: one capture holds one sensor",
-                product_name(product)
+                "{} packets in a capture of {} packets: one capture holds one sensor",
+                product_name(product),
+                model.name()
             ))
         } else {
             None
@@ -326,12 +325,13 @@ impl Clock {
     }
 }
 
-/// The sensor of a capture, from its first data packets: the VLP-16 unless
-/// they are tagged 0x21 (the HDL-32E's id, which VLP-16 captures carry
-/// too), then the sensor whose packet period (single or dual return) the
-/// median gap between them is within 15 % of. `ProductPolicy::Any`: the
-/// VLP-16, unchecked. Records the scan cannot read are left to the decode
-/// that follows, which reports them.
+/// The sensor of a capture, from its first data packets: the one the first
+/// packet's product byte names, unless it is 0x21 (the HDL-32E's id, which
+/// VLP-16 captures carry too), then the sensor whose packet period (single
+/// or dual return) the median gap between them is within 15 % of. A
+/// product this crate does not decode is left to the decode that follows,
+/// which refuses it. `ProductPolicy::Any`: the VLP-16, unchecked. Records
+/// the scan cannot read are left to the decode too, which reports them.
 fn detect_model(
     header: pcap::PcapHeader,
     bytes: &[u8],
@@ -354,7 +354,7 @@ fn detect_model(
         };
         let product = payload[1205];
         if seen == 0 && product != 0x21 {
-            return Ok(SensorModel::Vlp16);
+            return Ok(SensorModel::from_product(product).unwrap_or(SensorModel::Vlp16));
         }
         first.get_or_insert((record.index, record.offset));
         let ts = clock.unwrap(u32::from_le_bytes([
@@ -431,10 +431,17 @@ fn channel(payload: &[u8], block: usize, ch: usize) -> Return {
     }
 }
 
-/// Wraps an azimuth in hundredths of a degree into [0, 36000).
+/// Wraps an azimuth in hundredths of a degree within a turn of [0, 36000)
+/// into it.
 #[inline]
 fn wrap(az: f32) -> f32 {
-    if az >= 36000.0 { az - 36000.0 } else { az }
+    if az >= 36000.0 {
+        az - 36000.0
+    } else if az < 0.0 {
+        az + 36000.0
+    } else {
+        az
+    }
 }
 
 /// Accumulates firings into frames.
@@ -443,6 +450,10 @@ struct Assembler {
     model: SensorModel,
     cos_el: [f32; MAX_LASERS],
     sin_el: [f32; MAX_LASERS],
+    /// Each laser's horizontal offset, hundredths of a degree.
+    az_offset: [f32; MAX_LASERS],
+    /// Metres per distance unit.
+    unit_m: f32,
     done: Vec<(PointCloud, FrameStats)>,
     cloud: PointCloud,
     meta: Option<FrameStats>,
@@ -465,11 +476,22 @@ impl Assembler {
             cos_el[l] = c as f32;
             sin_el[l] = s as f32;
         }
+        let mut az_offset = [0.0; MAX_LASERS];
+        for (l, o) in model
+            .azimuth_offset_deg()
+            .iter()
+            .take(MAX_LASERS)
+            .enumerate()
+        {
+            az_offset[l] = (o * 100.0) as f32;
+        }
         Assembler {
             select,
             model,
             cos_el,
             sin_el,
+            az_offset,
+            unit_m: model.distance_unit_m() as f32,
             done: Vec::new(),
             cloud: PointCloud::with_capacity(0),
             meta: None,
@@ -551,11 +573,13 @@ impl Assembler {
                 self.firing(wrap(base + step[c] * 0.5 * s as f32), at.packet);
                 for l in 0..lasers {
                     let ch = s * lasers + l;
-                    let t_us = t_seq + l as f64 * m.laser_period_us();
-                    // Each laser fires a laser period after the one before:
-                    // its own azimuth (VLP-16 manual, "precise azimuth"; the
-                    // HDL-32E's likewise).
-                    let a = wrap(base + step[c] * (t_us / block_us - c as f64) as f32);
+                    let t_us = t_seq + m.firing_offset_us(l);
+                    // Each laser fires at its own time in the sequence, so
+                    // at its own azimuth (VLP-16 manual, "precise azimuth";
+                    // the others likewise), plus its horizontal offset
+                    // (VLP-32C).
+                    let turned = step[c] * (t_us / block_us - c as f64) as f32;
+                    let a = wrap(base + turned + self.az_offset[l]);
                     if stride == 1 {
                         self.emit(channel(payload, c, ch), l, a, t_us);
                     } else {
@@ -633,7 +657,7 @@ impl Assembler {
             self.no_return += 1;
             return;
         }
-        let r = f32::from(ret.distance) * DISTANCE_UNIT_M;
+        let r = f32::from(ret.distance) * self.unit_m;
         let (s, c) = (az * (std::f32::consts::PI / 18000.0)).sin_cos();
         let horizontal = r * self.cos_el[laser];
         let time = (((self.ts - self.t0) as f64 + t_us) * 1e-6) as f32;

@@ -1,4 +1,5 @@
-//! Velodyne VLP-16 and HDL-32E pcap decoding: a capture file in, one
+//! Velodyne pcap decoding (VLP-16, Puck LITE, Puck Hi-Res, HDL-32E,
+//! VLP-32C): a capture file in, one
 //! [`murk_types::PointCloud`] per revolution out.
 //!
 //! - [`read_pcap_file`] / [`decode_pcap`]: decode a classic libpcap capture
@@ -17,15 +18,19 @@
 //! # Geometry
 //!
 //! A data packet holds 12 blocks; each block an azimuth and two firing
-//! sequences of the 16 lasers (an HDL-32E block: one sequence of its 32).
-//! The second sequence's azimuth, and each laser's (VLP-16 lasers fire
-//! 2.304 µs apart, sequences 55.296 µs apart; HDL-32E lasers 1.152 µs
-//! apart, 46.08 µs a block), are interpolated towards the next block's
-//! azimuth across the 360° wrap; the last block of a packet turns at the
-//! rate of the block before. Laser id is the ring, and its elevation ω
-//! comes from [`SensorModel::elevation_deg`] (the VLP-16's is
-//! [`murk_types::LidarSpec::vlp16`]'s, the HDL-32E's
-//! [`murk_types::LidarSpec::hdl32e`]'s).
+//! sequences of the 16 lasers (an HDL-32E or VLP-32C block: one sequence of
+//! its 32). The second sequence's azimuth, and each laser's (VLP-16 lasers
+//! fire 2.304 µs apart, sequences 55.296 µs apart; HDL-32E lasers 1.152 µs
+//! apart, 46.08 µs a block; VLP-32C lasers in pairs 2.304 µs apart, 55.296
+//! µs a block), are interpolated towards the next block's azimuth across
+//! the 360° wrap; the last block of a packet turns at the rate of the block
+//! before. A VLP-32C laser's horizontal offset (±1.4°, ±4.2°) is added to
+//! its azimuth, and its distances count 4 mm, not 2. Laser id is the ring,
+//! and its elevation ω comes from [`SensorModel::elevation_deg`] (the
+//! VLP-16's is [`murk_types::LidarSpec::vlp16`]'s, the HDL-32E's
+//! [`murk_types::LidarSpec::hdl32e`]'s, the VLP-32C's
+//! [`murk_types::LidarSpec::vlp32c`]'s): a campaign of these sensors
+//! declares its `elevation_deg` by laser id in that order.
 //! The per-laser vertical offsets of the VLP-16 (≤ 11.2 mm) are not applied.
 //!
 //! **Frame convention.** The sensor measures azimuth α clockwise (seen from

@@ -207,21 +207,23 @@ pub enum ForeignPolicy {
 
 /// Which data packets are decoded, by their product-id byte (byte 1205).
 ///
-/// The VLP-16 geometry (16 lasers at ±15°, two firing sequences per block)
-/// and the HDL-32E's (32 lasers from −30.67° to +10.67°, one sequence per
-/// block) are implemented ([`crate::SensorModel`]); a packet from another
-/// model would decode to wrong points, so it is refused with
+/// The VLP-16 geometry (16 lasers at ±15°, two firing sequences per
+/// block), the Puck Hi-Res's (the same over ±10°), the HDL-32E's (32 lasers
+/// from −30.67° to +10.67°, one sequence per block) and the VLP-32C's (32
+/// lasers from −25° to +15° fired in pairs, at horizontal offsets) are
+/// implemented ([`crate::SensorModel`]); a packet from another model would
+/// decode to wrong points, so it is refused with
 /// [`crate::VelodyneError::UnsupportedProduct`] instead.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum ProductPolicy {
     /// 0x22 (VLP-16) and 0x23 (Puck LITE, same lasers) are decoded as the
-    /// VLP-16. 0x21 names the HDL-32E, but VLP-16 captures carrying it
+    /// VLP-16, 0x24 as the Puck Hi-Res, 0x28 as the VLP-32C. 0x21 names the HDL-32E, but VLP-16 captures carrying it
     /// exist (the real test capture of this repository is one): 0x21
     /// packets are decoded as the sensor whose packet period they keep —
     /// the VLP-16's 1327 µs (664 µs dual return) or the HDL-32E's 553 µs
     /// (276 µs) — and refused when they keep neither. Any other product
-    /// byte is refused, and so is a capture that mixes HDL-32E packets
-    /// with others.
+    /// byte is refused, and so is a capture that mixes one sensor's packets
+    /// with another's.
     #[default]
     Known,
     /// Every product byte is decoded with the VLP-16 geometry, unchecked.

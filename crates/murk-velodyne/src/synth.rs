@@ -1,4 +1,4 @@
-//! Synthetic VLP-16 and HDL-32E captures: the packet and pcap builders that this
+//! Synthetic Velodyne captures (every [`SensorModel`]): the packet and pcap builders that this
 //! crate's tests, benches and fuzz seeds share, public so that fixtures and
 //! other crates' tests can write `.pcap` recordings too.
 //!
@@ -10,8 +10,8 @@ use crate::decode::{BLOCK_LEN, BLOCKS, DATA_PAYLOAD_LEN, POSITION_PAYLOAD_LEN};
 use crate::options::{DATA_PORT, POSITION_PORT};
 use crate::{ReturnMode, SensorModel};
 
-/// One channel record: distance in 2 mm units (0 = no return) and
-/// calibrated reflectivity.
+/// One channel record: distance in the sensor's units (2 mm; 4 mm for the
+/// VLP-32C; 0 = no return) and calibrated reflectivity.
 pub type Channel = (u16, u8);
 
 /// A VLP-16 data packet, field by field.
@@ -21,15 +21,16 @@ pub struct DataPacket {
     pub flags: [[u8; 2]; BLOCKS],
     /// Azimuth of each block, hundredths of a degree clockwise from forward.
     pub azimuths: [u16; BLOCKS],
-    /// 32 channel records per block: VLP-16, lasers 0–15 of the first
-    /// firing sequence, then lasers 0–15 of the second; HDL-32E, lasers
-    /// 0–31 of its one sequence.
+    /// 32 channel records per block: VLP-16 and Puck Hi-Res, lasers 0–15
+    /// of the first firing sequence, then lasers 0–15 of the second;
+    /// HDL-32E and VLP-32C, lasers 0–31 of their one sequence.
     pub channels: [[Channel; 32]; BLOCKS],
     /// µs since the top of the hour.
     pub timestamp_us: u32,
     /// Return-mode byte (0x37 strongest, 0x38 last, 0x39 dual).
     pub return_mode: u8,
-    /// Product-id byte (0x22 VLP-16, 0x21 HDL-32E).
+    /// Product-id byte (0x22 VLP-16, 0x21 HDL-32E, 0x24 Puck Hi-Res, 0x28
+    /// VLP-32C).
     pub product: u8,
 }
 
@@ -214,8 +215,8 @@ pub struct Sweep {
     pub start_us: u32,
     /// Write a position packet after every this many data packets (0: never).
     pub position_every: usize,
-    /// The sensor: its timing, lasers and product byte (0x22 VLP-16, 0x21
-    /// HDL-32E).
+    /// The sensor: its timing, lasers and product byte
+    /// ([`SensorModel::product`]).
     pub model: SensorModel,
 }
 
@@ -250,9 +251,7 @@ impl Sweep {
             .map(|n| {
                 let ts = (f64::from(self.start_us) + n as f64 * period).round() as u64;
                 let mut p = DataPacket::new(self.mode, (ts % 3_600_000_000) as u32);
-                if self.model == SensorModel::Hdl32e {
-                    p.product = 0x21;
-                }
+                p.product = self.model.product();
                 for b in 0..BLOCKS {
                     let column = n * columns + if dual { b / 2 } else { b };
                     let az = (self.start_azimuth_deg * 100.0 + column as f64 * step).round();

@@ -72,7 +72,11 @@ fn expected_xyz(raw: u16, laser: usize, az_deg: f64) -> [f32; 3] {
 
 /// [`expected_xyz`] for the lasers of `spec`.
 fn expected_xyz_of(spec: &LidarSpec, raw: u16, laser: usize, az_deg: f64) -> [f32; 3] {
-    let r = f64::from(raw) * 0.002;
+    expected_xyz_m(spec, f64::from(raw) * 0.002, laser, az_deg)
+}
+
+/// [`expected_xyz_of`] at range `r` metres.
+fn expected_xyz_m(spec: &LidarSpec, r: f64, laser: usize, az_deg: f64) -> [f32; 3] {
     let w = spec.elevation_deg[laser].to_radians();
     let a = az_deg.to_radians();
     [
@@ -800,12 +804,12 @@ fn timestamp_past_the_hour_is_an_error() {
 #[test]
 fn other_velodyne_products_are_refused_unless_asked() {
     let mut p = turning(ReturnMode::Strongest, 0, 40);
-    p.product = 0x28;
+    p.product = 0xa1;
     p.channels[0][0] = (500, 1);
     let bytes = pcap_of_packets(&[p]);
     let e = decode_err(&bytes, &PcapOptions::default());
     assert!(
-        matches!(&e, VelodyneError::UnsupportedProduct { product: 0x28, reason, .. } if reason.contains("VLP-32C")),
+        matches!(&e, VelodyneError::UnsupportedProduct { product: 0xa1, reason, .. } if reason.contains("VLS-128")),
         "{e}"
     );
     let any = PcapOptions {
@@ -979,6 +983,127 @@ fn a_capture_mixing_hdl32e_packets_with_others_is_refused() {
     let e = decode_err(&pcap_of_packets(&packets), &PcapOptions::default());
     assert!(
         matches!(&e, VelodyneError::UnsupportedProduct { product: 0x22, packet: 5, reason, .. } if reason.contains("one capture holds one sensor")),
+        "{e}"
+    );
+}
+
+/// VLP-32C packets (0x28 every 663.552 µs), blocks turning by `step`
+/// hundredths of a degree from 0°, without returns.
+fn vlp32c_packets(n: u32, step: u16) -> Vec<DataPacket> {
+    (0..n)
+        .map(|k| {
+            let mut p = turning(
+                ReturnMode::Strongest,
+                (k * 12 * u32::from(step)) as u16,
+                step,
+            );
+            p.product = 0x28;
+            p.timestamp_us = 5000 + (f64::from(k) * 663.552).round() as u32;
+            p
+        })
+        .collect()
+}
+
+#[test]
+fn vlp32c_returns_land_on_their_lasers_at_their_pair_time_offset_and_4_mm_units() {
+    // Packet 0, block 2 (at 0.40°, turning 0.20° a block). Laser 0 (−25°,
+    // offset +1.4°) at 10 m, laser 1 (−1°, −4.2°, fired with laser 0) at
+    // 20 m, laser 19 (−3.667°, −4.2°, the tenth pair) at 30 m, laser 31
+    // (−1.333°, −1.4°, the last pair) at 4 m; distances count 4 mm.
+    let mut packets = vlp32c_packets(3, 20);
+    packets[0].channels[2][0] = (2500, 11);
+    packets[0].channels[2][1] = (5000, 33);
+    packets[0].channels[2][19] = (7500, 44);
+    packets[0].channels[2][31] = (1000, 22);
+    let c = decode(&pcap_of_packets(&packets));
+    assert_eq!(c.stats.sensor, Some(SensorModel::Vlp32c));
+    assert_eq!(c.frames.len(), 1);
+    let cloud = &c.frames[0];
+    assert_eq!(cloud.len(), 4);
+    let spec = LidarSpec::vlp32c();
+    let t = cloud.time.as_ref().expect("time column");
+    for (refl, laser, r_m, offset) in [
+        (11.0, 0usize, 10.0, 1.4),
+        (33.0, 1, 20.0, -4.2),
+        (44.0, 19, 30.0, -4.2),
+        (22.0, 31, 4.0, -1.4),
+    ] {
+        let i = cloud.intensity.iter().position(|&v| v == refl).unwrap();
+        assert_eq!(cloud.ring[i] as usize, laser);
+        // Pair p = laser / 2 fires p × 2.304 µs into the 55.296 µs block.
+        let into = (laser / 2) as f64 * 2.304;
+        let az = (0.40 + 0.20 * into / 55.296 + offset).rem_euclid(360.0);
+        assert_point(cloud, i, expected_xyz_m(&spec, r_m, laser, az));
+        let want = (2.0 * 55.296 + into) * 1e-6;
+        assert!(
+            (t[i] - want as f32).abs() < TOL_S,
+            "laser {laser}: time {}",
+            t[i]
+        );
+    }
+}
+
+#[test]
+fn vlp32c_and_puck_hi_res_sweeps_are_told_by_their_product_byte() {
+    // 600 rpm, 55.296 µs a firing sequence: 0.1991° a sequence, 1808.4 a
+    // turn. From 100°, 450 packets (5,400 firings) hold two full turns
+    // between partial ends; in dual return (6 firings a packet) 900
+    // packets do, and 225 of the Puck Hi-Res (two sequences a block).
+    for (model, mode, packets) in [
+        (SensorModel::Vlp32c, ReturnMode::Strongest, 450),
+        (SensorModel::Vlp32c, ReturnMode::Dual, 900),
+        (SensorModel::PuckHiRes, ReturnMode::Strongest, 225),
+    ] {
+        let sweep = Sweep {
+            rpm: 600.0,
+            packets,
+            start_azimuth_deg: 100.0,
+            mode,
+            model,
+            ..Sweep::default()
+        };
+        let c = decode(&sweep.to_pcap());
+        let what = format!("{} {mode:?}", model.name());
+        assert_eq!(c.stats.sensor, Some(model), "{what}");
+        let f = &c.stats.frames;
+        assert_eq!(f.len(), 4, "{what}: {f:?}");
+        assert!(f[0].partial && f[3].partial && !f[1].partial && !f[2].partial);
+        let per_turn = 360.0 / 0.1991;
+        for m in &f[1..3] {
+            assert!(
+                (m.firings as f64 - per_turn).abs() <= 1.5,
+                "{what}: {m:?} against {per_turn}"
+            );
+        }
+        if mode != ReturnMode::Dual {
+            // Every channel record is a point or a firing without return.
+            assert_eq!(
+                c.stats.points + c.stats.no_return,
+                packets as u64 * 384,
+                "{what}"
+            );
+        }
+        // Every laser is a ring at its own elevation.
+        let el = model.elevation_deg();
+        let cloud = &c.frames[1];
+        for laser in 0..model.lasers() as u16 {
+            let i = by_ring(cloud, laser);
+            let e = el[laser as usize] as f32;
+            assert!(
+                (cloud.elevation_deg(i) - e).abs() < 1e-3,
+                "{what}: laser {laser}"
+            );
+        }
+    }
+}
+
+#[test]
+fn a_capture_mixing_vlp32c_packets_with_others_is_refused() {
+    let mut packets = vlp32c_packets(6, 20);
+    packets[3].product = 0x22;
+    let e = decode_err(&pcap_of_packets(&packets), &PcapOptions::default());
+    assert!(
+        matches!(&e, VelodyneError::UnsupportedProduct { product: 0x22, packet: 4, reason, .. } if reason.contains("VLP-16 packets in a capture of VLP-32C packets")),
         "{e}"
     );
 }
