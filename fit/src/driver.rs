@@ -192,6 +192,12 @@ pub fn read_scans(path: &Path, spec: &LidarSpec) -> Result<(Vec<PointCloud>, Str
     let format = opts.format_of(path)?;
     let (mut frames, digest) = if format == PointFormat::Pcap {
         let frames = murk_io::read_frames_noted(path, &opts)?;
+        if frames.notes.both_returns {
+            return Err(FitError::File {
+                path: path.to_path_buf(),
+                reason: "a dual-return capture (each firing's strongest and last returns): murk's weather model has one return per firing, and the two read together count a fog echo in front of a kept target as a ghost beside it, which neither return mode sees; say which to read in campaign.toml, [lidar] pcap_return = \"strongest\" (a sensor's default mode) or \"last\"".into(),
+            });
+        }
         (full_revolutions(frames), sha256_hex(&read_file(path)?))
     } else {
         let bytes = read_file(path)?;

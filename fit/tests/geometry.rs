@@ -482,3 +482,67 @@ fn pcap_recordings_are_measured_on_their_own_lasers(
         "{name}: {warnings:?}"
     );
 }
+
+/// A dual-return `.pcap` holds two returns of many firings (strongest and
+/// last, at one ring and azimuth); murk's model has one. Until the
+/// campaign says which to read, fit (here its geometry, which every fit,
+/// diagnosis and campaign summary measures first) refuses the recording,
+/// naming it and the key; with `pcap_return` it reads that return.
+#[test]
+fn dual_return_pcap_recordings_are_refused_until_the_campaign_names_a_return() {
+    let write = |extra: &str| {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        std::fs::create_dir_all(d.join("lidar")).unwrap();
+        let el: Vec<String> = murk_types::VLP16_ELEVATION_DEG
+            .iter()
+            .map(|e| format!("{e}"))
+            .collect();
+        std::fs::write(
+            d.join("campaign.toml"),
+            format!(
+                "name = \"dual\"\nrules = \"pdd-2022-2023\"\n[lidar]\nmodel = \"VLP16\"\nelevation_deg = [{}]\n{extra}",
+                el.join(", ")
+            ),
+        )
+        .unwrap();
+        let mut csv = String::from(
+            "recording,timestamp,PWD12_Weather Type,PWD12_Rain intensity (mm/h),PWD12_MOR (m),PWD12_Temperature (°C),VS2K_MOR (m),WXT530_Rain intensity (mm/h)\n",
+        );
+        for k in 0..3u32 {
+            let sweep = murk_velodyne::synth::Sweep {
+                packets: 600,
+                start_azimuth_deg: 40.0 * f64::from(k),
+                mode: murk_velodyne::ReturnMode::Dual,
+                ..murk_velodyne::synth::Sweep::default()
+            };
+            std::fs::write(d.join("lidar").join(format!("r{k}.pcap")), sweep.to_pcap()).unwrap();
+            csv.push_str(&format!(
+                "r{k},2023-01-14T0{k}:00:00Z,Clear,0,20000,2.0,20000,0\n"
+            ));
+        }
+        std::fs::write(d.join("weather.csv"), csv).unwrap();
+        let campaign = Campaign::open(d).unwrap();
+        let inputs = murk_fit::observe::FitInputs::from_campaign(&campaign);
+        let got = murk_fit::observe::measure_geometry(&inputs);
+        (dir, got)
+    };
+    let (_d, got) = write("");
+    let e = got.expect_err("both returns refused").to_string();
+    assert!(
+        e.contains("r0.pcap") && e.contains("dual-return") && e.contains("pcap_return"),
+        "{e}"
+    );
+    for r in ["strongest", "last"] {
+        let (_d, got) = write(&format!("pcap_return = \"{r}\"\n"));
+        let (g, warnings) = got.unwrap_or_else(|e| panic!("{r}: {e}"));
+        assert_eq!(g.source, "measured", "{r}");
+        assert_eq!(g.rings.len(), 16, "{r}");
+        assert!(
+            (g.azimuth_step_deg / 0.1991 - 1.0).abs() < 0.005,
+            "{r}: step {}",
+            g.azimuth_step_deg
+        );
+        assert!(warnings.is_empty(), "{r}: {warnings:?}");
+    }
+}

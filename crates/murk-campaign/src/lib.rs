@@ -29,6 +29,7 @@
 //! | `bin_layout` | `xyzi` (KITTI), `xyzir` (Seeing Through Fog, nuScenes), `xyzit` | `.bin`: `xyzi` when the file size fits only it; a size that fits several layouts is refused |
 //! | `csv_columns` | e.g. `["x", "y", "z", "intensity", "ring"]` | none: CSV files start with a header line |
 //! | `min_range_m` | metres, e.g. `1.0`: nearer points are not returns (no-return firings kept as points at the origin, the vehicle's body) | none: every point is a return |
+//! | `pcap_return` | `strongest`, `last`: the return of each firing read from dual-return `.pcap` recordings | as recorded; fit and diagnose refuse a dual-return recording until told |
 //!
 //! ```
 //! use murk_campaign::Campaign;

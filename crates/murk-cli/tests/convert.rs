@@ -284,3 +284,60 @@ fn a_pcap_becomes_one_file_per_frame() {
         "{stdout}"
     );
 }
+
+#[test]
+fn pcap_return_selects_a_return_the_capture_recorded() {
+    let Some(pcap) = murk_types::real_data::real_data_file(
+        env!("CARGO_MANIFEST_DIR"),
+        "vlp16-test-90deg-1-50-frames.pcap",
+    ) else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    // The real capture is single-return, strongest: asking for its
+    // strongest returns writes what it recorded, asking for the last ones
+    // stops, naming the file and the packet.
+    let as_recorded = dir.path().join("recorded");
+    ok(&[
+        "convert",
+        s(&pcap),
+        "--out",
+        s(&as_recorded),
+        "--format",
+        "bin",
+    ]);
+    let strongest = dir.path().join("strongest");
+    ok(&[
+        "convert",
+        s(&pcap),
+        "--out",
+        s(&strongest),
+        "--format",
+        "bin",
+        "--pcap-return",
+        "strongest",
+    ]);
+    let stem = "vlp16-test-90deg-1-50-frames";
+    for k in [2, 30, 51] {
+        let name = format!("frame-{k:06}.bin");
+        let a = std::fs::read(as_recorded.join(stem).join(&name)).unwrap();
+        let b = std::fs::read(strongest.join(stem).join(&name)).unwrap();
+        assert!(a == b && !a.is_empty(), "{name}");
+    }
+    let err = fails(&[
+        "convert",
+        s(&pcap),
+        "--out",
+        s(&dir.path().join("last")),
+        "--format",
+        "bin",
+        "--pcap-return",
+        "last",
+    ]);
+    assert!(
+        err.contains(stem) && err.contains("asked for last returns") && err.contains("packet"),
+        "{err}"
+    );
+    let err = fails(&["convert", s(&pcap), "--out", "x", "--pcap-return", "first"]);
+    assert!(err.contains("strongest or last"), "{err}");
+}

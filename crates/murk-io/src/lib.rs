@@ -254,6 +254,9 @@ pub struct ReadNotes {
     /// Anything else worth a warning: skipped packets by kind, a capture
     /// cut short, intensities outside the range of their scale.
     pub warnings: Vec<String>,
+    /// A dual-return capture read as recorded: both returns of a firing
+    /// (where they differ) are points, at the same ring and azimuth.
+    pub both_returns: bool,
 }
 
 /// The scans of a file, each flagged partial or not, and the read's notes

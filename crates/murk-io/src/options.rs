@@ -2,7 +2,7 @@
 
 use std::path::Path;
 
-use murk_types::{BinLayout, IntensityScale, LidarSpec, PointFormat};
+use murk_types::{BinLayout, IntensityScale, LidarSpec, PcapReturn, PointFormat};
 
 use crate::IoError;
 
@@ -15,6 +15,7 @@ use crate::IoError;
 /// | `intensity_scale` | `lidar.intensity_scale`, else what the file records (a murk PCD's `# intensity_scale` comment), else the format's / layout's default | the scale the file's intensity is in |
 /// | `bin_layout` | `lidar.bin_layout`, else decided from the file size (see [`crate::parse_kitti`]) | record layout of `.bin` / `.pcd.bin` files |
 /// | `csv_columns` | `lidar.csv_columns`, else none: the first line is the header | column names of a header-less CSV file |
+/// | `pcap_return` | `lidar.pcap_return`, else as recorded (both returns of a dual-return capture, [`crate::ReadNotes::both_returns`]) | which return of each firing a `.pcap` gives |
 ///
 /// Readers never convert intensity: they label the returned cloud with the
 /// scale and callers call [`murk_types::PointCloud::to_calibrated`].
@@ -33,9 +34,19 @@ pub struct ReadOptions {
     /// `intensity` required; `ring`, `time` optional; any other name is a
     /// column murk keeps but does not read).
     pub csv_columns: Option<Vec<String>>,
+    /// Which return of each firing to read from a `.pcap` (overrides the
+    /// sensor description's); `None`: as recorded.
+    pub pcap_return: Option<PcapReturn>,
 }
 
 impl ReadOptions {
+    /// The return the caller asked `.pcap` captures for (the option, else
+    /// the sensor description's), if any.
+    pub fn declared_pcap_return(&self) -> Option<PcapReturn> {
+        self.pcap_return
+            .or_else(|| self.lidar.as_ref().and_then(|l| l.pcap_return))
+    }
+
     /// The format of `path` under these options.
     pub fn format_of(&self, path: &Path) -> Result<PointFormat, IoError> {
         match self.format {

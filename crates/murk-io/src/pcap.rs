@@ -2,8 +2,9 @@
 
 use std::path::Path;
 
+use murk_types::PcapReturn;
 use murk_types::{PointCloud, PointFormat};
-use murk_velodyne::{ForeignPolicy, PcapOptions, read_pcap_file};
+use murk_velodyne::{ForeignPolicy, PcapOptions, ReturnMode, ReturnSelect, read_pcap_file};
 
 use crate::{Frames, IoError, ReadNotes, ReadOptions, ScaleSource};
 
@@ -17,10 +18,18 @@ use crate::{Frames, IoError, ReadNotes, ReadOptions, ScaleSource};
 /// - a capture cut inside its last record (a recording stopped by pulling
 ///   power, an interrupted copy) **keeps the frames before the cut**; the
 ///   cut is reported in the notes.
-fn pcap_options() -> PcapOptions {
+///
+/// The returns are as recorded unless [`ReadOptions::declared_pcap_return`]
+/// names one.
+fn pcap_options(opts: &ReadOptions) -> PcapOptions {
     PcapOptions {
         on_foreign: ForeignPolicy::Skip,
         keep_truncated_tail: true,
+        return_mode: match opts.declared_pcap_return() {
+            None => ReturnSelect::AsRecorded,
+            Some(PcapReturn::Strongest) => ReturnSelect::Strongest,
+            Some(PcapReturn::Last) => ReturnSelect::Last,
+        },
         ..PcapOptions::default()
     }
 }
@@ -31,7 +40,7 @@ fn pcap_options() -> PcapOptions {
 /// The frames carry the decoder's calibrated intensity; an explicit
 /// [`ReadOptions::intensity_scale`] relabels them (values untouched).
 pub(crate) fn read_frames(path: &Path, opts: &ReadOptions) -> Result<Frames, IoError> {
-    let capture = read_pcap_file(path, &pcap_options()).map_err(|reason| IoError::Pcap {
+    let capture = read_pcap_file(path, &pcap_options(opts)).map_err(|reason| IoError::Pcap {
         path: path.to_path_buf(),
         reason,
     })?;
@@ -44,6 +53,8 @@ pub(crate) fn read_frames(path: &Path, opts: &ReadOptions) -> Result<Frames, IoE
             ScaleSource::Default
         },
         foreign_packets: stats.packets_foreign_skipped,
+        both_returns: opts.declared_pcap_return().is_none()
+            && stats.return_modes.contains_key(&ReturnMode::Dual),
         ..ReadNotes::default()
     };
     if stats.packets_foreign_skipped > 0 {

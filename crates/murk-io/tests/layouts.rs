@@ -376,6 +376,112 @@ fn a_capture_cut_mid_packet_keeps_the_frames_before_the_cut() {
     );
 }
 
+/// The x, y, z, intensity and ring of every point of `frames`, in order.
+fn points_of(frames: &murk_io::Frames) -> Vec<(f32, f32, f32, f32, u16)> {
+    frames
+        .clouds
+        .iter()
+        .flat_map(|c| {
+            (0..c.len()).map(move |i| (c.x[i], c.y[i], c.z[i], c.intensity[i], c.ring[i]))
+        })
+        .collect()
+}
+
+#[test]
+fn a_dual_return_capture_gives_the_return_asked_for_and_says_when_it_gives_both() {
+    use murk_types::PcapReturn;
+    use murk_velodyne::ReturnMode;
+    let dir = tempfile::tempdir().unwrap();
+    let sweep = |mode: ReturnMode, packets: usize| Sweep {
+        packets,
+        start_azimuth_deg: 90.0,
+        mode,
+        ..Sweep::default()
+    };
+    // The same firings recorded in dual and in last-return mode (a dual
+    // packet holds half the firings of a single one).
+    let dual = file(
+        dir.path(),
+        "dual.pcap",
+        &sweep(ReturnMode::Dual, 200).to_pcap(),
+    );
+    let last = file(
+        dir.path(),
+        "last.pcap",
+        &sweep(ReturnMode::Last, 100).to_pcap(),
+    );
+    let read = |p: &Path, r: Option<PcapReturn>| {
+        let opts = ReadOptions {
+            pcap_return: r,
+            ..ReadOptions::default()
+        };
+        read_frames_noted(p, &opts)
+    };
+    let both = read(&dual, None).unwrap();
+    assert!(both.notes.both_returns);
+    let from_dual = read(&dual, Some(PcapReturn::Last)).unwrap();
+    assert!(!from_dual.notes.both_returns);
+    let recorded = read(&last, None).unwrap();
+    assert!(!recorded.notes.both_returns);
+    let got = points_of(&from_dual);
+    let want = points_of(&recorded);
+    // The same return, at the same place to 1 cm (0.01° at 60 m): a
+    // packet's last firing turns at the rate of the one before it, and a
+    // dual packet ends after six firings where a single one ends after
+    // twelve, so the azimuths of a few firings differ by thousandths of a
+    // degree.
+    let same = |a: &(f32, f32, f32, f32, u16), b: &(f32, f32, f32, f32, u16)| {
+        (a.0 - b.0).abs() < 1e-2
+            && (a.1 - b.1).abs() < 1e-2
+            && (a.2 - b.2).abs() < 1e-2
+            && (a.3, a.4) == (b.3, b.4)
+    };
+    let first_diff = got.iter().zip(&want).position(|(a, b)| !same(a, b));
+    assert!(
+        got.len() == want.len() && first_diff.is_none(),
+        "the last returns, as a last-return sensor gives them: {} against {} points, first difference at {first_diff:?}: {:?} against {:?}",
+        got.len(),
+        want.len(),
+        first_diff.map(|i| got[i]),
+        first_diff.map(|i| want[i])
+    );
+    // Both returns: the last ones and the strongest where they differ (two
+    // of three firings of the synthetic scene).
+    let strongest = read(&dual, Some(PcapReturn::Strongest)).unwrap();
+    let (n_both, n_last, n_strong) = (
+        points_of(&both).len(),
+        got.len(),
+        points_of(&strongest).len(),
+    );
+    assert!(n_both > n_last && n_both < 2 * n_last, "{n_both} {n_last}");
+    assert_eq!(n_strong, n_last, "one return per firing");
+    // The sensor's description asks too, and the option wins over it.
+    let mut spec = murk_types::LidarSpec::vlp16();
+    spec.pcap_return = Some(PcapReturn::Strongest);
+    let opts = ReadOptions {
+        lidar: Some(spec.clone()),
+        ..ReadOptions::default()
+    };
+    assert_eq!(
+        points_of(&read_frames_noted(&dual, &opts).unwrap()),
+        points_of(&strongest)
+    );
+    let opts = ReadOptions {
+        lidar: Some(spec),
+        pcap_return: Some(PcapReturn::Last),
+        ..ReadOptions::default()
+    };
+    assert_eq!(points_of(&read_frames_noted(&dual, &opts).unwrap()), got);
+    // A single-return capture has no other return to give.
+    let e = read(&last, Some(PcapReturn::Strongest))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("last.pcap") && e.contains("asked for strongest"),
+        "{e}"
+    );
+}
+
 #[test]
 fn a_pcap_error_is_its_message_once() {
     let dir = tempfile::tempdir().unwrap();

@@ -157,6 +157,64 @@ impl BinLayout {
     }
 }
 
+/// Which return of each firing murk reads from a dual-return `.pcap`
+/// capture (`--pcap-return`, `pcap_return` in `campaign.toml`).
+///
+/// A sensor in dual-return mode reports two returns of each firing, the
+/// strongest and the last (one, repeated, where they are the same echo).
+/// murk's weather model has one return per firing — what a sensor in
+/// strongest-return (its default) or last-return mode reports — so fit and
+/// diagnose refuse a dual-return capture until told which to read; apply
+/// and convert write both unless told. Single-return captures are read as
+/// recorded; asking for the return they did not record is an error.
+///
+/// ```
+/// use murk_types::PcapReturn;
+///
+/// let r: PcapReturn = "last".parse().unwrap();
+/// assert_eq!(r, PcapReturn::Last);
+/// assert_eq!(r.name(), "last");
+/// assert!("first".parse::<PcapReturn>().is_err());
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum PcapReturn {
+    /// The strongest return of each firing (a sensor's default mode).
+    Strongest,
+    /// The last return of each firing (through fog, rain or spray, the
+    /// farthest echo the sensor detected).
+    Last,
+}
+
+impl PcapReturn {
+    /// The name used by `--pcap-return` and `campaign.toml`.
+    pub fn name(self) -> &'static str {
+        match self {
+            PcapReturn::Strongest => "strongest",
+            PcapReturn::Last => "last",
+        }
+    }
+}
+
+impl std::str::FromStr for PcapReturn {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "strongest" => Ok(PcapReturn::Strongest),
+            "last" => Ok(PcapReturn::Last),
+            other => Err(format!(
+                "unknown pcap return {other:?}: expected strongest or last"
+            )),
+        }
+    }
+}
+
+impl std::fmt::Display for PcapReturn {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
 impl std::str::FromStr for BinLayout {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, Self::Err> {

@@ -73,7 +73,7 @@ pub use extension::{
     ExtensionObservable, ModelExtension, POINT_COVARIATES, PointCovariates, RANGE_CELLS,
     RangeCells, RayDensity, combine as combine_extensions,
 };
-pub use format::{BinLayout, PointFormat};
+pub use format::{BinLayout, PcapReturn, PointFormat};
 pub use intensity::IntensityScale;
 pub use lidar::{
     HDL32E_ELEVATION_DEG, LidarSpec, NEAR_POINT_M, NEAR_POINT_SHARE, PUCK_HI_RES_ELEVATION_DEG,

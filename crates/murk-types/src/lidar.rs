@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::{BinLayout, IntensityScale, TypesError};
+use crate::{BinLayout, IntensityScale, PcapReturn, TypesError};
 
 /// The LiDAR of a campaign (`[lidar]` in `campaign.toml`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -45,6 +45,11 @@ pub struct LidarSpec {
     /// CSV files start with a header line.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub csv_columns: Option<Vec<String>>,
+    /// Which return of each firing to read from dual-return `.pcap`
+    /// recordings (`strongest`, `last`); absent means as recorded, which fit
+    /// and diagnose refuse for a dual-return capture ([`PcapReturn`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pcap_return: Option<PcapReturn>,
 }
 
 fn one() -> f64 {
@@ -142,6 +147,7 @@ impl LidarSpec {
             intensity_scale: None,
             bin_layout: None,
             csv_columns: None,
+            pcap_return: None,
         }
     }
 

@@ -28,7 +28,7 @@ use anyhow::{Context, bail};
 use murk_infer::batch;
 use murk_infer::{ApplyParams, ApplySummary, BatchOptions, Severity, SlopeSource};
 use murk_io::{PcdData, ReadOptions};
-use murk_types::{BinLayout, IntensityScale, PointFormat, WeatherClass};
+use murk_types::{BinLayout, IntensityScale, PcapReturn, PointFormat, WeatherClass};
 
 /// Arguments of `murk apply`.
 #[derive(clap::Args, Debug)]
@@ -111,6 +111,10 @@ pub struct Args {
     /// Fog), xyzit; default: KITTI where the file size leaves no doubt.
     #[arg(long, value_name = "LAYOUT")]
     pub bin_layout: Option<BinLayout>,
+    /// Which return of each firing to read from dual-return `.pcap`
+    /// inputs: strongest or last (default: the campaign's `pcap_return`, else as recorded: both).
+    #[arg(long, value_name = "RETURN")]
+    pub pcap_return: Option<PcapReturn>,
     /// Also apply to the partial first and last revolutions of captures.
     #[arg(long)]
     pub keep_partial: bool,
@@ -211,6 +215,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             intensity_scale: a.intensity_scale,
             bin_layout: a.bin_layout,
             csv_columns: a.columns.clone(),
+            pcap_return: a.pcap_return,
         },
         format: a.format,
         pcd_data: a.pcd_data,

@@ -54,7 +54,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use murk_io::{PcdData, ReadOptions, WriteOptions, read_frames_noted, write_cloud_with};
-use murk_types::{BinLayout, IntensityScale, PointFormat};
+use murk_types::{BinLayout, IntensityScale, PcapReturn, PointFormat};
 
 /// Arguments of `murk convert`.
 #[derive(clap::Args, Debug)]
@@ -87,6 +87,10 @@ pub struct Args {
     /// Fog), xyzit; default: KITTI where the file size leaves no doubt.
     #[arg(long, value_name = "LAYOUT")]
     pub bin_layout: Option<BinLayout>,
+    /// Which return of each firing to read from dual-return `.pcap`
+    /// inputs: strongest or last (default: as recorded, both).
+    #[arg(long, value_name = "RETURN")]
+    pub pcap_return: Option<PcapReturn>,
     /// Also write the partial first and last revolutions of captures.
     #[arg(long)]
     pub keep_partial: bool,
@@ -234,6 +238,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         intensity_scale: args.input_intensity_scale,
         bin_layout: args.bin_layout,
         csv_columns: args.columns.clone(),
+        pcap_return: args.pcap_return,
         ..ReadOptions::default()
     };
     let write_opts = WriteOptions {
