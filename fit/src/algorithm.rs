@@ -415,6 +415,46 @@ impl FittedTable {
                         .map(|r| format!(": {r}"))
                         .unwrap_or_default()
                 );
+                let list = |v: &[Option<f64>]| {
+                    v.iter()
+                        .map(|e| e.map_or("–".to_string(), |e| format!("{e:.3}")))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                };
+                if let Some(r) = &l.reflectivity {
+                    let _ = writeln!(
+                        s,
+                        "    reflectivity term: {} (k {}; held-out gain {:.3} nats per recording, better in {} of {}, sign-flip p {:.4}){}",
+                        if r.chosen { "applied" } else { "not applied" },
+                        list(&r.exponents),
+                        r.gain_nats_per_recording,
+                        r.recordings_better,
+                        r.recordings,
+                        r.p_value,
+                        r.reason
+                            .as_deref()
+                            .map(|r| format!(": {r}"))
+                            .unwrap_or_default()
+                    );
+                    if let Some(m) = &r.mor {
+                        let _ = writeln!(
+                            s,
+                            "      k changing with MOR: {} (k at {:.1} m {}, per ln MOR {}; held-out gain over one k {:.3} nats per recording, better in {} of {}, sign-flip p {:.4}){}",
+                            if m.chosen { "applied" } else { "not applied" },
+                            m.mor_reference_m,
+                            list(&m.exponents),
+                            list(&m.per_ln_mor),
+                            m.gain_nats_per_recording,
+                            m.recordings_better,
+                            m.recordings,
+                            m.p_value,
+                            m.reason
+                                .as_deref()
+                                .map(|r| format!(": {r}"))
+                                .unwrap_or_default()
+                        );
+                    }
+                }
             }
             if let Some(o) = &c.occlusion {
                 let _ = writeln!(s, "    {}", occlusion_line(o));

@@ -7,8 +7,8 @@ use murk_types::{
 };
 
 use crate::bend::{
-    Binning, compare_laws, compare_reflectivity, fit_powers, fit_reflectivities, half_survival,
-    half_z, lack_of_fit,
+    Binning, TermComparison, compare_laws, compare_reflectivity, fit_powers, fit_reflectivities,
+    half_survival, half_z, lack_of_fit,
 };
 
 use crate::FitValidParams;
@@ -783,17 +783,19 @@ fn bend_and_check(
     };
     // The reflectivity term beside the law the comparison above prefers
     // (the power law when it wins, whether or not it is applied).
-    let refl: Option<Vec<Option<crate::bend::ReflectivityFit>>> = deltas.map(|d| {
+    // The applied term's fits, and M_ref when its exponent changes with MOR.
+    type AppliedTerm = (Vec<Option<crate::bend::ReflectivityFit>>, Option<f64>);
+    let refl: Option<AppliedTerm> = deltas.map(|d| {
         // Start from the power law's exponent when it wins.
         let from: Vec<Option<f64>> = powers
             .iter()
             .map(|f| f.as_ref().map(|f| f.exponent).filter(|_| wins))
             .collect();
-        let fits = fit_reflectivities(&all, &fitted, &from, opts, bin);
+        let fits = fit_reflectivities(&all, &fitted, &from, None, opts, bin);
         let ev = compare_reflectivity(
             recs,
             &fitted,
-            wins,
+            TermComparison::Term { bend: wins },
             opts,
             bin,
             folds as usize,
@@ -837,11 +839,71 @@ fn bend_and_check(
                 ),
                 _ => None,
             },
+            mor: None,
         });
-        if applied {
-            fits
-        } else {
-            vec![None; fitted.len()]
+        if !refl_wins {
+            return (vec![None; fitted.len()], None);
+        }
+        // The term won: does its exponent change with MOR? `k` at the
+        // recordings' geometric mean MOR and its change per unit of
+        // `ln MOR`, against one `k`, on the same folds.
+        let ln_mor_ref = recs.iter().map(|r| r.mor.ln()).sum::<f64>() / recs.len() as f64;
+        let varied = fit_reflectivities(&all, &fitted, &from, Some(ln_mor_ref), opts, bin);
+        let ev = compare_reflectivity(
+            recs,
+            &fitted,
+            TermComparison::MorVarying {
+                bend: wins,
+                ln_mor_ref,
+            },
+            opts,
+            bin,
+            folds as usize,
+            seed("reflectivity-mor-choice", ""),
+        );
+        let all_varied = varied.iter().zip(&fitted).all(|(f, x)| !*x || f.is_some());
+        let mor_wins = all_varied && matches!(&ev, Ok(e) if e.gain > 0.0 && e.p <= alpha);
+        let mor_applied = mor_wins && applied;
+        if let Some(r) = choice.reflectivity.as_mut() {
+            r.mor = Some(murk_types::ReflectivityMorChoice {
+                chosen: mor_applied,
+                mor_reference_m: ln_mor_ref.exp(),
+                exponents: varied
+                    .iter()
+                    .map(|f| f.as_ref().map(|f| f.reflectivity_exponent))
+                    .collect(),
+                per_ln_mor: varied
+                    .iter()
+                    .map(|f| f.as_ref().map(|f| f.per_ln_mor))
+                    .collect(),
+                per_ln_mor_ci95: fold_intervals(
+                    varied.iter().map(|f| f.as_ref().map(|f| f.per_ln_mor)),
+                    &ev,
+                    crate::bend::mor_slope_jackknife_interval,
+                )
+                .unwrap_or_else(|| vec![None; varied.len()]),
+                gain_nats_per_recording: ev.as_ref().map_or(0.0, |e| e.gain),
+                recordings_better: ev.as_ref().map_or(0, |e| e.better as u32),
+                recordings: ev.as_ref().map_or(0, |e| e.recordings as u32),
+                p_value: ev.as_ref().map_or(1.0, |e| e.p),
+                reason: match (all_varied, &ev) {
+                    (false, _) => Some(
+                        "the term with an exponent that changes with MOR could not be fitted in every band"
+                            .into(),
+                    ),
+                    (_, Err(e)) => Some(e.clone()),
+                    _ if mor_wins && !applied => Some(
+                        "an exponent that changes with MOR predicts held-out recordings better, but the term is not applied: apply_bend is off (murk fit --bend)"
+                            .into(),
+                    ),
+                    _ => None,
+                },
+            });
+        }
+        match (applied, mor_applied) {
+            (false, _) => (vec![None; fitted.len()], None),
+            (true, false) => (fits, None),
+            (true, true) => (varied, Some(ln_mor_ref.exp())),
         }
     });
     let rs = cx.range_scale;
@@ -863,9 +925,10 @@ fn bend_and_check(
         });
         // An applied reflectivity term replaces the law: its own exponent
         // of MOR (1 when the line was kept), coefficient and edge width.
+        let mor_reference_m = refl.as_ref().and_then(|(_, m)| *m);
         let refl_band = refl
             .as_ref()
-            .and_then(|f| f[i].as_ref())
+            .and_then(|(f, _)| f[i].as_ref())
             .zip(deltas)
             .and_then(|(f, d)| {
                 let a = *f.fit.bands[i].slope.as_ref().ok()?;
@@ -881,6 +944,8 @@ fn bend_and_check(
                     reference,
                     floor,
                     edge_width: f.fit.bands[i].width,
+                    exponent_per_ln_mor: mor_reference_m.map(|_| f.per_ln_mor),
+                    mor_reference_m,
                 }),
             });
         }
@@ -913,7 +978,8 @@ fn bend_and_check(
                 // Each return its own distance: the law's crossing over
                 // the bin's own returns, pooled by range as the data's.
                 Some((f, ..)) => crate::bend::predicted_half_crossing(&in_bin, i, |r, delta, u| {
-                    let shift = (1.0 - f.exponent) * r.mor.ln() - f.reflectivity_exponent * delta;
+                    let ln_mor = r.mor.ln();
+                    let shift = (1.0 - f.exponent) * ln_mor - f.term().at(ln_mor) * delta;
                     f.fit.keep_probability(opts, i, (u.ln() + shift).exp())
                 })
                 .ok(),

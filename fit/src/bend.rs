@@ -72,26 +72,62 @@ pub fn shifted_observations(
         .collect()
 }
 
+/// The exponent of reflectivity of a term at a recording's MOR:
+/// `k + g·(ln MOR − ln M_ref)` (`g = 0`: one `k` at every MOR).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TermExponent {
+    /// `k` at the reference MOR.
+    pub k: f64,
+    /// Change of `k` per unit of `ln MOR`.
+    pub g: f64,
+    /// `ln` of the reference MOR (metres).
+    pub ln_mor_ref: f64,
+}
+
+impl TermExponent {
+    /// One `k` at every MOR.
+    pub fn constant(k: f64) -> Self {
+        TermExponent {
+            k,
+            g: 0.0,
+            ln_mor_ref: 0.0,
+        }
+    }
+
+    /// The exponent at `ln MOR` (exactly `k` when `g` is 0).
+    #[inline]
+    pub fn at(&self, ln_mor: f64) -> f64 {
+        if self.g == 0.0 {
+            self.k
+        } else {
+            self.k + self.g * (ln_mor - self.ln_mor_ref)
+        }
+    }
+}
+
 /// [`shifted_observations`] with a reflectivity term: each class of a
 /// band's trials ([`RecordingTrials::classes`]) also moves by `−k·δ`, `δ`
-/// its `ln x` less the band's reference, so a fit on them places the edge
-/// at `a·MOR^c·(x/x_ref)^k`. `k = 0` is [`shifted_observations`] exactly.
+/// its `ln x` less the band's reference and `k` the term's exponent at the
+/// recording's MOR, so a fit on them places the edge at
+/// `a·MOR^c·(x/x_ref)^k`. `k = g = 0` is [`shifted_observations`] exactly.
 pub fn shifted_class_observations(
     recs: &[&RecordingTrials],
     n_bands: usize,
     c: f64,
-    k: f64,
+    e: TermExponent,
     step: f64,
     anchor: f64,
 ) -> Vec<Vec<Obs>> {
-    if k == 0.0 {
+    if e.k == 0.0 && e.g == 0.0 {
         return shifted_observations(recs, n_bands, c, step, anchor);
     }
     (0..n_bands)
         .map(|b| {
             linear_binned(
                 recs.iter().flat_map(|r| {
-                    let shift = (1.0 - c) * r.mor.ln();
+                    let ln_mor = r.mor.ln();
+                    let shift = (1.0 - c) * ln_mor;
+                    let k = e.at(ln_mor);
                     r.classes
                         .get(b)
                         .into_iter()
@@ -190,21 +226,29 @@ pub fn fit_band_at(
     opts: &SurvivalOptions,
     bin: Binning,
 ) -> Option<SurvivalResult> {
-    fit_band_at_k(recs, n_bands, band, c, 0.0, opts, bin)
+    fit_band_at_k(
+        recs,
+        n_bands,
+        band,
+        c,
+        TermExponent::constant(0.0),
+        opts,
+        bin,
+    )
 }
 
-/// [`fit_band_at`] with the reflectivity exponent `k` too
+/// [`fit_band_at`] with the reflectivity exponent `e` too
 /// ([`shifted_class_observations`]).
 pub fn fit_band_at_k(
     recs: &[&RecordingTrials],
     n_bands: usize,
     band: usize,
     c: f64,
-    k: f64,
+    e: TermExponent,
     opts: &SurvivalOptions,
     bin: Binning,
 ) -> Option<SurvivalResult> {
-    let mut obs = shifted_class_observations(recs, n_bands, c, k, bin.step, bin.anchor);
+    let mut obs = shifted_class_observations(recs, n_bands, c, e, bin.step, bin.anchor);
     for (j, o) in obs.iter_mut().enumerate() {
         if j != band {
             o.clear();
@@ -410,6 +454,11 @@ where
 /// gives about 0.1–0.25: see [`ReflectivityFit`]).
 const REFLECTIVITY_EXPONENT_RANGE: (f64, f64) = (-1.0, 1.5);
 
+/// Range of the change of the reflectivity exponent per unit of `ln MOR`
+/// searched (the lidar equation in fog gives about 0.03–0.05 over MOR
+/// 4–300 m: see [`ReflectivityFit`]).
+const MOR_SLOPE_RANGE: (f64, f64) = (-0.5, 0.5);
+
 /// A band's law with a reflectivity term: `a·MOR^c·(x/x_ref)^k`.
 ///
 /// Why a power of reflectivity: in fog the hard echo of a return of
@@ -418,28 +467,62 @@ const REFLECTIVITY_EXPONENT_RANGE: (f64, f64) = (-1.0, 1.5);
 /// `ln x = 2αR + 2 ln R + const`: `d ln R / d ln x = 1/(2αR + 2)`, about
 /// 0.13–0.2 at the ranges where returns vanish (`α = ln 20/MOR`,
 /// `R ≈ 0.5–0.9·MOR`), nearly constant, so a power of `x` with one exponent
-/// per band follows it.
+/// per band follows it within a few percent. Where the data pin it down
+/// further, `k` may change with MOR (`k + g·ln(MOR/M_ref)`): `R₅₀/MOR`
+/// shrinks as MOR grows (the law bends, `c < 1`), so `1/(2αR₅₀ + 2)` grows
+/// — about 0.13 to 0.20 from MOR 4 to 30 m on the physics fixture's scene.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ReflectivityFit {
     /// The exponent `c` of MOR (1 when the line was kept).
     pub exponent: f64,
-    /// The exponent `k` of reflectivity.
+    /// The exponent `k` of reflectivity (at `ln_mor_ref` when `per_ln_mor`
+    /// is not 0).
     pub reflectivity_exponent: f64,
+    /// The change of `k` per unit of `ln MOR` (0: one `k`).
+    pub per_ln_mor: f64,
+    /// `ln` of the MOR at which `k` is `reflectivity_exponent`.
+    pub ln_mor_ref: f64,
     /// The survival fit on the shifted trials (its band slope is `a`).
     pub fit: SurvivalResult,
 }
 
+impl ReflectivityFit {
+    /// The term's exponent of reflectivity.
+    pub fn term(&self) -> TermExponent {
+        TermExponent {
+            k: self.reflectivity_exponent,
+            g: self.per_ln_mor,
+            ln_mor_ref: self.ln_mor_ref,
+        }
+    }
+
+    /// Log-likelihood of recording `r`'s trials of band `b` under the fit.
+    fn log_likelihood(&self, opts: &SurvivalOptions, b: usize, r: &RecordingTrials) -> Option<f64> {
+        let ln_mor = r.mor.ln();
+        let shift = (1.0 - self.exponent) * ln_mor;
+        let k = self.term().at(ln_mor);
+        r.classes
+            .get(b)
+            .into_iter()
+            .flatten()
+            .map(|(delta, obs)| log_likelihood(&self.fit, opts, b, obs, shift - k * delta))
+            .sum()
+    }
+}
+
 /// Fits band `band`'s law with a reflectivity term on `recs`: profile
 /// likelihood over `k` at `c = bend_from` (1 when `None`, the line), and,
-/// when the law bends, over `c` and `k` by turns, each turn followed by a
-/// search along its own move, until a turn moves neither (each search
-/// Brent's method). `None` when the band has no class
-/// spread (every trial in one class) or no slope.
+/// when the law bends or `k` changes with MOR (`vary`: `ln` of the
+/// reference MOR), over `c` (bending), `k` and `g` (varying) by turns, each
+/// turn followed by a search along its own move, until a turn moves none
+/// (each search Brent's method). `None` when the band has no class spread
+/// (every trial in one class) or no slope.
 pub fn fit_reflectivity(
     recs: &[&RecordingTrials],
     n_bands: usize,
     band: usize,
     bend_from: Option<f64>,
+    vary: Option<f64>,
     opts: &SurvivalOptions,
     bin: Binning,
 ) -> Option<ReflectivityFit> {
@@ -454,53 +537,81 @@ pub fn fit_reflectivity(
     if !(spread.1 - spread.0 > 0.0) {
         return None;
     }
-    let eval = |c: f64, k: f64| fit_band_at_k(recs, n_bands, band, c, k, opts, bin);
-    let cost = |c: f64, k: f64| eval(c, k).map_or(f64::INFINITY, |r| r.nll);
+    let ln_mor_ref = vary.unwrap_or(0.0);
+    let term = |k: f64, g: f64| TermExponent { k, g, ln_mor_ref };
+    let eval =
+        |c: f64, k: f64, g: f64| fit_band_at_k(recs, n_bands, band, c, term(k, g), opts, bin);
+    let cost = |c: f64, k: f64, g: f64| eval(c, k, g).map_or(f64::INFINITY, |r| r.nll);
     let (klo, khi) = REFLECTIVITY_EXPONENT_RANGE;
-    let (clo, chi) = EXPONENT_RANGE;
-    let mut c = bend_from.unwrap_or(1.0);
-    let mut k = crate::stats::optim::minimize_scalar(&|k| cost(c, k), klo, khi, EXPONENT_TOL)?;
+    let c0 = bend_from.unwrap_or(1.0);
+    let k0 = crate::stats::optim::minimize_scalar(&|k| cost(c0, k, 0.0), klo, khi, EXPONENT_TOL)?;
+    // The coordinates searched by turns, in order: c (bending), k, g
+    // (varying), each with its range; the point is (c, k, g).
+    let mut axes: Vec<(usize, (f64, f64))> = Vec::new();
     if bend_from.is_some() {
+        axes.push((0, EXPONENT_RANGE));
+    }
+    if !axes.is_empty() || vary.is_some() {
+        axes.push((1, REFLECTIVITY_EXPONENT_RANGE));
+    }
+    if vary.is_some() {
+        axes.push((2, MOR_SLOPE_RANGE));
+    }
+    let at = |x: [f64; 3]| cost(x[0], x[1], x[2]);
+    let mut x = [c0, k0, 0.0];
+    if !axes.is_empty() {
         // By turns, each turn followed by a search along the turn's own
-        // move: where `c` and `k` trade off (a ridge of the likelihood:
-        // in a scene whose dim returns sit near, both move the band's
-        // edge alike) turns alone creep along the ridge and stop short
-        // of its top, at a point that depends on where they started.
-        // The cost at (c, k) as it stands (each a survival fit).
-        let mut here = cost(c, k);
+        // move: where the coordinates trade off (a ridge of the
+        // likelihood: in a scene whose dim returns sit near, c and k both
+        // move the band's edge alike) turns alone creep along the ridge
+        // and stop short of its top, at a point that depends on where they
+        // started. The cost at x as it stands (each a survival fit).
+        let mut here = at(x);
         for _ in 0..8 {
             let before = here;
-            let c1 = crate::stats::optim::minimize_scalar(&|c| cost(c, k), clo, chi, EXPONENT_TOL)?;
-            let k1 =
-                crate::stats::optim::minimize_scalar(&|k| cost(c1, k), klo, khi, EXPONENT_TOL)?;
-            let (dc, dk) = (c1 - c, k1 - k);
-            (c, k) = (c1, k1);
-            here = cost(c, k);
-            let size = dc.abs().max(dk.abs());
+            let from = x;
+            for &(j, (lo, hi)) in &axes {
+                let line = |v: f64| {
+                    let mut y = x;
+                    y[j] = v;
+                    at(y)
+                };
+                x[j] = crate::stats::optim::minimize_scalar(&line, lo, hi, EXPONENT_TOL)?;
+            }
+            let d: Vec<f64> = axes.iter().map(|&(j, _)| x[j] - from[j]).collect();
+            here = at(x);
+            let size = d.iter().fold(0f64, |m, v| m.max(v.abs()));
             if size < EXPONENT_TOL {
                 break;
             }
-            // How far along (dc, dk) the searched ranges allow, up to 8
-            // moves.
-            let room = |x: f64, d: f64, (lo, hi): (f64, f64)| {
-                if d > 0.0 {
-                    (hi - x) / d
-                } else if d < 0.0 {
-                    (lo - x) / d
+            // How far along d the searched ranges allow, up to 8 moves.
+            let room = |v: f64, dv: f64, (lo, hi): (f64, f64)| {
+                if dv > 0.0 {
+                    (hi - v) / dv
+                } else if dv < 0.0 {
+                    (lo - v) / dv
                 } else {
                     f64::INFINITY
                 }
             };
-            let t_max =
-                8f64.min(room(c, dc, EXPONENT_RANGE))
-                    .min(room(k, dk, REFLECTIVITY_EXPONENT_RANGE));
+            let t_max = axes
+                .iter()
+                .zip(&d)
+                .fold(8f64, |t, (&(j, r), &dv)| t.min(room(x[j], dv, r)));
             if t_max > EXPONENT_TOL / size {
-                let along = |t: f64| cost(c + t * dc, k + t * dk);
+                let moved = |t: f64| {
+                    let mut y = x;
+                    for (&(j, _), &dv) in axes.iter().zip(&d) {
+                        y[j] = x[j] + t * dv;
+                    }
+                    y
+                };
+                let along = |t: f64| at(moved(t));
                 let t =
                     crate::stats::optim::minimize_scalar(&along, 0.0, t_max, EXPONENT_TOL / size)?;
                 let there = along(t);
                 if there < here {
-                    (c, k) = (c + t * dc, k + t * dk);
+                    x = moved(t);
                     here = there;
                 }
             }
@@ -511,21 +622,26 @@ pub fn fit_reflectivity(
             }
         }
     }
-    let fit = eval(c, k)?;
+    let [c, k, g] = x;
+    let fit = eval(c, k, g)?;
     fit.nll.is_finite().then_some(ReflectivityFit {
         exponent: c,
         reflectivity_exponent: k,
+        per_ln_mor: g,
+        ln_mor_ref,
         fit,
     })
 }
 
 /// [`fit_reflectivity`] of every band with a slope (`fitted[i]`), bands in
 /// parallel; `bend_from[i]` is band `i`'s exponent of MOR to start from
-/// when the law bends (`None`: the line).
+/// when the law bends (`None`: the line); `vary`, the `ln` of the
+/// reference MOR when `k` may change with MOR.
 pub fn fit_reflectivities(
     recs: &[&RecordingTrials],
     fitted: &[bool],
     bend_from: &[Option<f64>],
+    vary: Option<f64>,
     opts: &SurvivalOptions,
     bin: Binning,
 ) -> Vec<Option<ReflectivityFit>> {
@@ -533,7 +649,7 @@ pub fn fit_reflectivities(
         .into_par_iter()
         .map(|i| {
             fitted[i]
-                .then(|| fit_reflectivity(recs, fitted.len(), i, bend_from[i], opts, bin))
+                .then(|| fit_reflectivity(recs, fitted.len(), i, bend_from[i], vary, opts, bin))
                 .flatten()
         })
         .collect()
@@ -557,19 +673,43 @@ fn log_likelihood(
     Some(l)
 }
 
-/// The held-out comparison of the reflectivity term with the law without
-/// it: the line (`bend` false) or the power law (`bend` true), each fitted
-/// per band with the same freedom, both fitted without the fold, as
-/// [`compare_laws`]. `fold_exponents` holds the folds' `k`.
+/// What [`compare_reflectivity`] compares on held-out recordings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum TermComparison {
+    /// The term of one `k` against the law without it: the line (`bend`
+    /// false) or the power law (`bend` true); `fold_exponents` holds the
+    /// folds' `k`.
+    Term {
+        /// Whether the law bends.
+        bend: bool,
+    },
+    /// The term whose `k` changes with MOR (`ln_mor_ref`: `ln` of the
+    /// reference MOR) against the term of one `k`, both from the bend's
+    /// exponent when `bend`; `fold_exponents` holds the folds' `g`.
+    MorVarying {
+        /// Whether the law bends.
+        bend: bool,
+        /// `ln` of the reference MOR (metres).
+        ln_mor_ref: f64,
+    },
+}
+
+/// The held-out comparison of a reflectivity term ([`TermComparison`]),
+/// each law fitted per band with the same freedom, all fitted without the
+/// fold, as [`compare_laws`].
 pub fn compare_reflectivity(
     recs: &[RecordingTrials],
     fitted: &[bool],
-    bend: bool,
+    what: TermComparison,
     opts: &SurvivalOptions,
     bin: Binning,
     folds: usize,
     seed: [u8; 32],
 ) -> Result<LawEvidence, String> {
+    let (bend, vary) = match what {
+        TermComparison::Term { bend } => (bend, None),
+        TermComparison::MorVarying { bend, ln_mor_ref } => (bend, Some(ln_mor_ref)),
+    };
     let n_bands = fitted.len();
     held_out(recs, folds, seed, |train, held| {
         // The law without the term: (exponent, fit) per band.
@@ -588,8 +728,13 @@ pub fn compare_reflectivity(
             .iter()
             .map(|b| b.as_ref().map(|(c, _)| *c).filter(|_| bend))
             .collect();
-        let alt = fit_reflectivities(train, fitted, &from, opts, bin);
-        if alt.iter().zip(fitted).any(|(p, f)| *f && p.is_none()) {
+        let alt = fit_reflectivities(train, fitted, &from, vary, opts, bin);
+        // With `vary`, the term of one `k` is the base.
+        let base_term = vary.map(|_| fit_reflectivities(train, fitted, &from, None, opts, bin));
+        let missing = |fits: &[Option<ReflectivityFit>]| {
+            fits.iter().zip(fitted).any(|(p, f)| *f && p.is_none())
+        };
+        if missing(&alt) || base_term.as_deref().is_some_and(missing) {
             return Err(
                 "the reflectivity term could not be fitted with a fold of recordings left out"
                     .into(),
@@ -597,7 +742,15 @@ pub fn compare_reflectivity(
         }
         let exponents = alt
             .iter()
-            .map(|p| p.as_ref().map(|p| p.reflectivity_exponent))
+            .map(|p| {
+                p.as_ref().map(|p| {
+                    if vary.is_some() {
+                        p.per_ln_mor
+                    } else {
+                        p.reflectivity_exponent
+                    }
+                })
+            })
             .collect();
         let mut gains = Vec::new();
         for r in held {
@@ -607,23 +760,11 @@ pub fn compare_reflectivity(
                 let (Some(alt), Some((c0, base))) = (alt, &base[b]) else {
                     continue;
                 };
-                let l0 = log_likelihood(base, opts, b, &r.bands[b], (1.0 - c0) * r.mor.ln());
-                let shift = (1.0 - alt.exponent) * r.mor.ln();
-                let l1: Option<f64> = r
-                    .classes
-                    .get(b)
-                    .into_iter()
-                    .flatten()
-                    .map(|(delta, obs)| {
-                        log_likelihood(
-                            &alt.fit,
-                            opts,
-                            b,
-                            obs,
-                            shift - alt.reflectivity_exponent * delta,
-                        )
-                    })
-                    .sum();
+                let l0 = match &base_term {
+                    Some(t) => t[b].as_ref().and_then(|t| t.log_likelihood(opts, b, r)),
+                    None => log_likelihood(base, opts, b, &r.bands[b], (1.0 - c0) * r.mor.ln()),
+                };
+                let l1 = alt.log_likelihood(opts, b, r);
                 if let (Some(l0), Some(l1)) = (l0, l1) {
                     any = true;
                     d += l1 - l0;
@@ -635,6 +776,16 @@ pub fn compare_reflectivity(
         }
         Ok((exponents, gains))
     })
+}
+
+/// The grouped-jackknife 95 % interval of `g`, the change of the
+/// reflectivity exponent per unit of `ln MOR` (as [`jackknife_interval`],
+/// over its searched range).
+pub fn mor_slope_jackknife_interval(
+    estimate: f64,
+    leave_out: &[Option<f64>],
+) -> Result<[f64; 2], String> {
+    jackknife_in(estimate, leave_out, MOR_SLOPE_RANGE)
 }
 
 /// The grouped-jackknife 95 % interval of the reflectivity exponent `k`
@@ -996,14 +1147,15 @@ mod tests {
     /// counts made so.
     #[test]
     fn reflectivity_term_known_answer_from_either_start() {
-        let make = |c_true: f64| -> Vec<RecordingTrials> {
+        let make_with = |c_true: f64, g_true: f64| -> Vec<RecordingTrials> {
             (0..8)
                 .map(|j| {
                     let mor = 5.0 * (12f64).powf(j as f64 / 7.0);
                     let classes: Vec<(f64, Vec<Obs>)> = [-1.0, -0.5, 0.0, 0.5, 1.0]
                         .iter()
                         .map(|&delta: &f64| {
-                            let d = 0.9 * mor.powf(c_true) * (0.2 * delta).exp();
+                            let k = 0.2 + g_true * (mor / 20.0).ln();
+                            let d = 0.9 * mor.powf(c_true) * (k * delta).exp();
                             let obs = (0..110)
                                 .map(|i| {
                                     let r = 0.5 * (1.0f64 + 0.04).powi(i);
@@ -1029,6 +1181,7 @@ mod tests {
                 })
                 .collect()
         };
+        let make = |c_true: f64| make_with(c_true, 0.0);
         let opts = SurvivalOptions {
             edge: EdgeShape::Probit,
             shared_width: true,
@@ -1043,8 +1196,8 @@ mod tests {
         };
         let recs = make(0.7);
         let refs: Vec<&RecordingTrials> = recs.iter().collect();
-        let a = fit_reflectivity(&refs, 1, 0, Some(1.0), &opts, bin).unwrap();
-        let b = fit_reflectivity(&refs, 1, 0, Some(0.5), &opts, bin).unwrap();
+        let a = fit_reflectivity(&refs, 1, 0, Some(1.0), None, &opts, bin).unwrap();
+        let b = fit_reflectivity(&refs, 1, 0, Some(0.5), None, &opts, bin).unwrap();
         for f in [&a, &b] {
             assert!((f.exponent - 0.7).abs() < 0.01, "c {}", f.exponent);
             assert!(
@@ -1064,7 +1217,7 @@ mod tests {
         );
         let recs = make(1.0);
         let refs: Vec<&RecordingTrials> = recs.iter().collect();
-        let l = fit_reflectivity(&refs, 1, 0, None, &opts, bin).unwrap();
+        let l = fit_reflectivity(&refs, 1, 0, None, None, &opts, bin).unwrap();
         assert_eq!(l.exponent, 1.0);
         assert!(
             (l.reflectivity_exponent - 0.2).abs() < 0.01,
@@ -1073,6 +1226,27 @@ mod tests {
         );
         let slope = *l.fit.bands[0].slope.as_ref().unwrap();
         assert!((slope / 0.9 - 1.0).abs() < 0.01, "a {slope}");
+        // `k` changing with MOR, 0.2 + 0.05·ln(MOR/20): with `vary` the
+        // fit recovers c, k at 20 m and g; without it, one k between.
+        let recs = make_with(0.7, 0.05);
+        let refs: Vec<&RecordingTrials> = recs.iter().collect();
+        let v = fit_reflectivity(&refs, 1, 0, Some(1.0), Some(20f64.ln()), &opts, bin).unwrap();
+        assert!((v.exponent - 0.7).abs() < 0.01, "c {}", v.exponent);
+        assert!(
+            (v.reflectivity_exponent - 0.2).abs() < 0.01,
+            "k {}",
+            v.reflectivity_exponent
+        );
+        assert!((v.per_ln_mor - 0.05).abs() < 0.005, "g {}", v.per_ln_mor);
+        assert_eq!(v.term().at(20f64.ln()), v.reflectivity_exponent);
+        let one = fit_reflectivity(&refs, 1, 0, Some(1.0), None, &opts, bin).unwrap();
+        assert_eq!(one.per_ln_mor, 0.0);
+        assert!(
+            one.fit.nll > v.fit.nll + 1.0,
+            "{} {}",
+            one.fit.nll,
+            v.fit.nll
+        );
     }
 
     /// Linear binning: `c = 1` gives the observations back, every `c`

@@ -527,10 +527,11 @@ impl ApplyParams {
                 slope,
                 vanishing_distance_m: slope * mor * range_scale,
                 edge_width: b_edge_width,
+                // The term at this MOR (its exponent may change with MOR).
                 reflectivity: if identity {
                     None
                 } else {
-                    law.and_then(|l| l.reflectivity())
+                    law.and_then(|l| l.reflectivity()).map(|r| r.at_mor(mor))
                 },
             });
         }

@@ -56,9 +56,11 @@ pub struct BandRule {
     pub vanishing_distance_m: f64,
     /// Relative soft-edge width, when the table has it.
     pub edge_width: Option<f64>,
-    /// The law's reflectivity term inside the band, if it has one: a return
-    /// of calibrated reflectivity `x` vanishes at
-    /// `vanishing_distance_m · factor(x)` (murk-types owns the factor).
+    /// The law's reflectivity term inside the band at the applied MOR, if
+    /// it has one: a return of calibrated reflectivity `x` vanishes at
+    /// `vanishing_distance_m · factor(x)` (murk-types owns the factor; a
+    /// term whose exponent changes with MOR is resolved at the applied MOR
+    /// with [`murk_types::ReflectivityDependence::at_mor`]).
     pub reflectivity: Option<murk_types::ReflectivityDependence>,
 }
 

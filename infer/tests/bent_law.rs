@@ -126,6 +126,11 @@ fn a_bad_law_is_refused_naming_the_field() {
 }
 
 fn reflectivity_table(edge_width: Option<f64>) -> CoefficientTable {
+    reflectivity_table_varying(edge_width, None)
+}
+
+/// [`reflectivity_table`] with `k` changing with MOR: `(g, M_ref)`.
+fn reflectivity_table_varying(edge_width: Option<f64>, g: Option<(f64, f64)>) -> CoefficientTable {
     let mut t = seed_table();
     let fog = t.weathers.get_mut(&WeatherClass::Fog).unwrap();
     for b in &mut fog.vanishing_slope {
@@ -137,6 +142,8 @@ fn reflectivity_table(edge_width: Option<f64>) -> CoefficientTable {
                 reference: X_REF,
                 floor: 1.0,
                 edge_width,
+                exponent_per_ln_mor: g.map(|g| g.0),
+                mor_reference_m: g.map(|g| g.1),
             }),
         });
     }
@@ -156,8 +163,21 @@ const X_REF: f64 = 20.0;
 /// inside their own distance; the applier reports the same distance.
 #[test]
 fn hard_edge_places_each_return_by_its_reflectivity() {
-    let t = reflectivity_table(None);
+    hard_edge_by_reflectivity(None);
+}
+
+/// As [`hard_edge_places_each_return_by_its_reflectivity`] with `k`
+/// changing with MOR (`0.2 + 0.06·ln(MOR/50)`): each MOR applies its own
+/// exponent.
+#[test]
+fn an_exponent_that_changes_with_mor_is_applied_at_the_mor() {
+    hard_edge_by_reflectivity(Some((0.06, 50.0)));
+}
+
+fn hard_edge_by_reflectivity(g: Option<(f64, f64)>) {
+    let t = reflectivity_table_varying(None, g);
     for mor in [20.0, 60.0, 200.0] {
+        let k_mor = K + g.map_or(0.0, |(g, m)| g * f64::ln(mor / m));
         let a = ApplyParams::new(WeatherClass::Fog, Severity::Mor(mor))
             .build(&t)
             .unwrap();
@@ -165,7 +185,7 @@ fn hard_edge_places_each_return_by_its_reflectivity() {
         let mut want = Vec::new();
         let mut k = 0u16;
         for refl in [0.0f32, 2.0, 7.0, 12.0, 60.0, 200.0] {
-            let d = A * f64::powf(mor, B) * ((refl as f64).max(1.0) / X_REF).powf(K);
+            let d = A * f64::powf(mor, B) * ((refl as f64).max(1.0) / X_REF).powf(k_mor);
             assert!(
                 (a.vanishing_distance_m(refl as f64) - d).abs() < 1e-9 * d,
                 "MOR {mor} x {refl}"

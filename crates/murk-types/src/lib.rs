@@ -83,8 +83,8 @@ pub use table::{
     ClearCoefficients, CoefficientTable, CountLaw, CountLawChoice, CountUnit, EdgeTest,
     ExcludedRecording, Gaussian, InputDigest, Interval, LackOfFit, LawChoice, MorBin, NoiseLaw,
     OcclusionTest, Provenance, RadarCoefficients, RainConversion, ReflectivityChoice,
-    ReturnMoments, RingGeometry, SensorGeometry, SlopeBand, SurvivalBin, SurvivalFit, SweepBand,
-    TABLE_FORMAT, TableLidar, Uncertainty, WeatherCoefficients,
+    ReflectivityMorChoice, ReturnMoments, RingGeometry, SensorGeometry, SlopeBand, SurvivalBin,
+    SurvivalFit, SweepBand, TABLE_FORMAT, TableLidar, Uncertainty, WeatherCoefficients,
 };
 pub use vanishing::{ReflectivityDependence, VanishingLaw};
 pub use walk::{LeftOut, Walk, WalkedFile, walk_folder};

@@ -495,6 +495,42 @@ pub struct ReflectivityChoice {
     /// applied.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reason: Option<String>,
+    /// Whether `k` changes with MOR, compared once the term is chosen
+    /// (absent when it was not).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mor: Option<ReflectivityMorChoice>,
+}
+
+/// The held-out comparison of a reflectivity term whose exponent changes
+/// with MOR, `k + g·ln(MOR / M_ref)`, with the term of one `k` (both with
+/// the law the comparison prefers), as [`ReflectivityChoice`] compares the
+/// term with the law without it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ReflectivityMorChoice {
+    /// True when applied: it predicts held-out recordings significantly
+    /// better than one `k`, and the term itself is applied.
+    pub chosen: bool,
+    /// `M_ref`, metres: the geometric mean MOR of the weather's recordings.
+    pub mor_reference_m: f64,
+    /// Per band, `k` at `M_ref`, fitted with `g` on all recordings.
+    pub exponents: Vec<Option<f64>>,
+    /// Per band, `g`: the change of `k` per unit of `ln MOR`.
+    pub per_ln_mor: Vec<Option<f64>>,
+    /// Per band, the 95 % grouped-jackknife interval of `g` over the
+    /// comparison's folds.
+    pub per_ln_mor_ci95: Vec<Option<Interval>>,
+    /// Mean held-out gain over the term of one `k`, nats per recording.
+    pub gain_nats_per_recording: f64,
+    /// Recordings the varying exponent predicted better.
+    pub recordings_better: u32,
+    /// Recordings compared.
+    pub recordings: u32,
+    /// One-sided sign-flip p-value of the mean gain.
+    pub p_value: f64,
+    /// Why the comparison could not be made, or why a chosen `g` is not
+    /// applied.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
 }
 
 /// A confidence interval and how it was made.
@@ -1394,6 +1430,8 @@ mod tests {
                 reference: 20.0,
                 floor: 1.0,
                 edge_width: Some(0.04),
+                exponent_per_ln_mor: None,
+                mor_reference_m: None,
             }),
         });
         r.scale_edge_width(1.5, None);

@@ -7,6 +7,7 @@
 //! linear (the seed's law):  D = s · MOR · ρ
 //! power (a law that bends): D = a · MOR^b · ρ
 //! with reflectivity:        D = a · MOR^b · ρ · (max(x, x₀) / x_ref)^k
+//! k varying with MOR:       k = k₀ + g · ln(MOR / M_ref)
 //! ```
 //!
 //! with `ρ` the sensor's range scale. `b = 1` is the linear law with
@@ -25,8 +26,11 @@
 //! `"reflectivity": {"exponent": k, "reference": x_ref, "floor": x₀}` when the
 //! distance also grows with reflectivity inside the band (the lidar
 //! equation in fog gives each return its own distance by its reflectivity:
-//! the hard echo `∝ x·exp(−2αR)/R²` must outlast the fog's own echo); a
-//! band without a `law` field has the linear law of its `slope`.
+//! the hard echo `∝ x·exp(−2αR)/R²` must outlast the fog's own echo), and
+//! `"exponent_per_ln_mor": g, "mor_reference_m": M_ref` in it when that
+//! exponent changes with MOR (the same equation gives
+//! `k = 1/(2αR₅₀ + 2)`, which grows as `R₅₀/MOR` shrinks with MOR); a band
+//! without a `law` field has the linear law of its `slope`.
 //!
 //! ```
 //! use murk_types::{ReflectivityDependence, VanishingLaw};
@@ -38,12 +42,14 @@
 //!         reference: 16.0,
 //!         floor: 1.0,
 //!         edge_width: None,
+//!         exponent_per_ln_mor: None,
+//!         mor_reference_m: None,
 //!     }),
 //! };
 //! // 2·100^0.5 = 20 m at the reference reflectivity; four times as
 //! // reflective reaches twice as far.
 //! assert!((law.distance_m(100.0, 1.0) - 20.0).abs() < 1e-12);
-//! assert!((law.distance_m(100.0, 1.0) * law.reflectivity_factor(64.0) - 40.0).abs() < 1e-12);
+//! assert!((law.distance_m(100.0, 1.0) * law.reflectivity_factor(64.0, 100.0) - 40.0).abs() < 1e-12);
 //! ```
 
 use serde::{Deserialize, Serialize};
@@ -71,9 +77,11 @@ pub enum VanishingLaw {
     },
 }
 
-/// The factor `(max(x, floor) / reference)^exponent` by which a return of
+/// The factor `(max(x, floor) / reference)^k` by which a return of
 /// calibrated reflectivity `x` reaches further than the band's distance at
-/// its reference reflectivity.
+/// its reference reflectivity; `k = exponent + exponent_per_ln_mor ·
+/// ln(MOR / mor_reference_m)` when the exponent changes with MOR
+/// ([`ReflectivityDependence::at_mor`] gives the term at one MOR).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct ReflectivityDependence {
     /// Exponent `k` of reflectivity.
@@ -90,14 +98,44 @@ pub struct ReflectivityDependence {
     /// now places. `None`: the band's.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub edge_width: Option<f64>,
+    /// How much `k` grows per unit of `ln MOR` (`g`); `None`: one `k` at
+    /// every MOR.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub exponent_per_ln_mor: Option<f64>,
+    /// The MOR, metres, at which `k` is `exponent` (with
+    /// `exponent_per_ln_mor`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mor_reference_m: Option<f64>,
 }
 
 impl ReflectivityDependence {
     /// The factor at calibrated reflectivity `x` (a NaN `x` counts as the
-    /// floor).
+    /// floor) with the exponent `exponent`: the term's factor at
+    /// `mor_reference_m` when the exponent changes with MOR; use
+    /// [`ReflectivityDependence::at_mor`] first for another MOR.
     #[inline]
     pub fn factor(&self, x: f64) -> f64 {
         (x.max(self.floor) / self.reference).powf(self.exponent)
+    }
+
+    /// The exponent `k` at `mor_m`.
+    #[inline]
+    pub fn exponent_at(&self, mor_m: f64) -> f64 {
+        match (self.exponent_per_ln_mor, self.mor_reference_m) {
+            (Some(g), Some(m)) => self.exponent + g * (mor_m / m).ln(),
+            _ => self.exponent,
+        }
+    }
+
+    /// The term at one MOR: its exponent there, constant in MOR (what an
+    /// applier at `mor_m` uses).
+    pub fn at_mor(&self, mor_m: f64) -> ReflectivityDependence {
+        ReflectivityDependence {
+            exponent: self.exponent_at(mor_m),
+            exponent_per_ln_mor: None,
+            mor_reference_m: None,
+            ..*self
+        }
     }
 
     /// Why the term cannot be applied, if it cannot.
@@ -114,7 +152,13 @@ impl ReflectivityDependence {
                 self.exponent, self.reference, self.floor, self.edge_width
             ));
         }
-        Ok(())
+        match (self.exponent_per_ln_mor, self.mor_reference_m) {
+            (None, None) => Ok(()),
+            (Some(g), Some(m)) if g.is_finite() && m.is_finite() && m > 0.0 => Ok(()),
+            (g, m) => Err(format!(
+                "reflectivity exponent_per_ln_mor {g:?}, mor_reference_m {m:?}: both or neither, the first finite, the second finite and > 0"
+            )),
+        }
     }
 }
 
@@ -144,11 +188,13 @@ impl VanishingLaw {
         }
     }
 
-    /// How much further than [`VanishingLaw::distance_m`] a return of
-    /// calibrated reflectivity `x` reaches (1 without a reflectivity term).
+    /// How much further than [`VanishingLaw::distance_m`] at `mor_m` a
+    /// return of calibrated reflectivity `x` reaches (1 without a
+    /// reflectivity term).
     #[inline]
-    pub fn reflectivity_factor(&self, x: f64) -> f64 {
-        self.reflectivity().map_or(1.0, |r| r.factor(x))
+    pub fn reflectivity_factor(&self, x: f64, mor_m: f64) -> f64 {
+        self.reflectivity()
+            .map_or(1.0, |r| r.at_mor(mor_m).factor(x))
     }
 
     /// The exponent of MOR (1 for the linear law).
@@ -190,7 +236,13 @@ impl VanishingLaw {
                 a,
                 b,
                 reflectivity: Some(r),
-            } => format!("{a:.4}·MOR^{b:.3}·(x/{:.3})^{:.3}", r.reference, r.exponent),
+            } => match (r.exponent_per_ln_mor, r.mor_reference_m) {
+                (Some(g), Some(m)) => format!(
+                    "{a:.4}·MOR^{b:.3}·(x/{:.3})^({:.3}{:+.3}·ln(MOR/{m:.1}))",
+                    r.reference, r.exponent, g
+                ),
+                _ => format!("{a:.4}·MOR^{b:.3}·(x/{:.3})^{:.3}", r.reference, r.exponent),
+            },
         }
     }
 }
@@ -257,6 +309,8 @@ mod tests {
             reference: 20.0,
             floor: 2.0,
             edge_width: None,
+            exponent_per_ln_mor: None,
+            mor_reference_m: None,
         };
         let p = VanishingLaw::Power {
             a: 1.0,
@@ -265,13 +319,13 @@ mod tests {
         };
         // 16 times the reference: twice as far; at or below the floor the
         // floor's factor (2/20)^0.25; NaN counts as the floor.
-        assert!((p.reflectivity_factor(320.0) - 2.0).abs() < 1e-12);
+        assert!((p.reflectivity_factor(320.0, 30.0) - 2.0).abs() < 1e-12);
         let f0 = 0.1f64.powf(0.25);
-        assert!((p.reflectivity_factor(0.0) - f0).abs() < 1e-12);
-        assert!((p.reflectivity_factor(f64::NAN) - f0).abs() < 1e-12);
-        assert_eq!(p.reflectivity_factor(20.0), 1.0);
+        assert!((p.reflectivity_factor(0.0, 30.0) - f0).abs() < 1e-12);
+        assert!((p.reflectivity_factor(f64::NAN, 30.0) - f0).abs() < 1e-12);
+        assert_eq!(p.reflectivity_factor(20.0, 30.0), 1.0);
         assert_eq!(
-            VanishingLaw::Linear { slope: 0.3 }.reflectivity_factor(5.0),
+            VanishingLaw::Linear { slope: 0.3 }.reflectivity_factor(5.0, 30.0),
             1.0
         );
         assert!(p.check().is_ok());
@@ -292,5 +346,52 @@ mod tests {
             "{}",
             p.describe()
         );
+    }
+
+    #[test]
+    fn an_exponent_that_changes_with_mor_known_answers_and_layout() {
+        let r = ReflectivityDependence {
+            exponent: 0.15,
+            reference: 10.0,
+            floor: 1.0,
+            edge_width: None,
+            exponent_per_ln_mor: Some(0.05),
+            mor_reference_m: Some(20.0),
+        };
+        // k = 0.15 at 20 m, 0.15 + 0.05·ln 4 at 80 m.
+        assert_eq!(r.exponent_at(20.0), 0.15);
+        let k80 = 0.15 + 0.05 * 4f64.ln();
+        assert!((r.exponent_at(80.0) - k80).abs() < 1e-15);
+        let at = r.at_mor(80.0);
+        assert_eq!((at.exponent_per_ln_mor, at.mor_reference_m), (None, None));
+        assert!((at.factor(40.0) - 4f64.powf(k80)).abs() < 1e-12);
+        let p = VanishingLaw::Power {
+            a: 1.0,
+            b: 1.0,
+            reflectivity: Some(r),
+        };
+        assert!((p.reflectivity_factor(40.0, 80.0) - 4f64.powf(k80)).abs() < 1e-12);
+        assert!((p.reflectivity_factor(40.0, 20.0) - 4f64.powf(0.15)).abs() < 1e-12);
+        assert!(p.check().is_ok());
+        assert!(p.describe().contains("ln(MOR/20.0)"), "{}", p.describe());
+        let j = serde_json::to_string(&p).unwrap();
+        assert!(
+            j.contains(r#""exponent_per_ln_mor":0.05,"mor_reference_m":20.0"#),
+            "{j}"
+        );
+        assert_eq!(serde_json::from_str::<VanishingLaw>(&j).unwrap(), p);
+        // Both or neither, and a reference MOR above 0.
+        for (g, m) in [
+            (Some(0.05), None),
+            (None, Some(20.0)),
+            (Some(0.05), Some(0.0)),
+        ] {
+            let bad = ReflectivityDependence {
+                exponent_per_ln_mor: g,
+                mor_reference_m: m,
+                ..r
+            };
+            assert!(bad.check().is_err(), "{g:?} {m:?}");
+        }
     }
 }

@@ -123,9 +123,11 @@ pub struct Args {
     /// Fit a reflectivity term inside each band (`·(x/x_ref)^k`: the lidar
     /// equation in fog gives each return its own vanishing distance by its
     /// reflectivity) and compare it with the chosen law on held-out
-    /// recordings (`law_choice.reflectivity`); applied with `--bend`. A fit
-    /// takes several times as long (measured: 3.7 s → 17 s on a 50-recording
-    /// campaign).
+    /// recordings (`law_choice.reflectivity`); once it wins, also whether
+    /// `k` changes with MOR (`k + g·ln(MOR/M_ref)`,
+    /// `law_choice.reflectivity.mor`); applied with `--bend`. A fit takes
+    /// several times as long (measured: 3.7 s → 17 s on a 50-recording
+    /// campaign, about twice that again where the term wins).
     #[arg(long, conflicts_with = "no_law_comparison")]
     pub reflectivity_law: bool,
     /// Bootstrap replicates for rate uncertainties.
