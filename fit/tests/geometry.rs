@@ -405,46 +405,65 @@ fn hdl32e_and_vlp32c_pcap_recordings_are_measured_on_their_own_lasers() {
     }
 }
 
+/// A campaign of three clear `.pcap` recordings, `sweep` turned by 40° from
+/// one to the next, whose `[lidar]` declares `spec`'s model, `elevations`
+/// and step and then `extra` lines; the geometry fit measures on it.
+fn pcap_geometry(
+    spec: &murk_types::LidarSpec,
+    elevations: &[f64],
+    extra: &str,
+    sweep: &murk_velodyne::synth::Sweep,
+) -> (
+    tempfile::TempDir,
+    Result<(murk_types::SensorGeometry, Vec<String>), murk_fit::FitError>,
+) {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::create_dir_all(d.join("lidar")).unwrap();
+    let el: Vec<String> = elevations.iter().map(|e| format!("{e}")).collect();
+    std::fs::write(
+        d.join("campaign.toml"),
+        format!(
+            "name = \"pcap\"\nrules = \"pdd-2022-2023\"\n[lidar]\nmodel = \"{}\"\nelevation_deg = [{}]\nazimuth_resolution_deg = {}\n{extra}",
+            spec.model,
+            el.join(", "),
+            spec.azimuth_resolution_deg
+        ),
+    )
+    .unwrap();
+    let mut csv = String::from(
+        "recording,timestamp,PWD12_Weather Type,PWD12_Rain intensity (mm/h),PWD12_MOR (m),PWD12_Temperature (°C),VS2K_MOR (m),WXT530_Rain intensity (mm/h)\n",
+    );
+    for k in 0..3u32 {
+        let turned = murk_velodyne::synth::Sweep {
+            start_azimuth_deg: 40.0 * f64::from(k),
+            ..sweep.clone()
+        };
+        std::fs::write(d.join("lidar").join(format!("r{k}.pcap")), turned.to_pcap()).unwrap();
+        csv.push_str(&format!(
+            "r{k},2023-01-14T0{k}:00:00Z,Clear,0,20000,2.0,20000,0\n"
+        ));
+    }
+    std::fs::write(d.join("weather.csv"), csv).unwrap();
+    let campaign = Campaign::open(d).unwrap();
+    let inputs = murk_fit::observe::FitInputs::from_campaign(&campaign);
+    let got = murk_fit::observe::measure_geometry(&inputs);
+    (dir, got)
+}
+
 fn pcap_recordings_are_measured_on_their_own_lasers(
     model: murk_velodyne::SensorModel,
     spec: &murk_types::LidarSpec,
 ) {
+    let sweep = murk_velodyne::synth::Sweep {
+        rpm: 600.0,
+        packets: (400.0 * 46.08 / model.block_period_us()).round() as usize,
+        model,
+        ..murk_velodyne::synth::Sweep::default()
+    };
     let write = |elevations: &[f64]| {
-        let dir = tempfile::tempdir().unwrap();
-        let d = dir.path();
-        std::fs::create_dir_all(d.join("lidar")).unwrap();
-        let el: Vec<String> = elevations.iter().map(|e| format!("{e}")).collect();
-        std::fs::write(
-            d.join("campaign.toml"),
-            format!(
-                "name = \"pcap\"\nrules = \"pdd-2022-2023\"\n[lidar]\nmodel = \"{}\"\nelevation_deg = [{}]\nazimuth_resolution_deg = {}\n",
-                spec.model,
-                el.join(", "),
-                spec.azimuth_resolution_deg
-            ),
-        )
-        .unwrap();
-        let mut csv = String::from(
-            "recording,timestamp,PWD12_Weather Type,PWD12_Rain intensity (mm/h),PWD12_MOR (m),PWD12_Temperature (°C),VS2K_MOR (m),WXT530_Rain intensity (mm/h)\n",
-        );
-        for k in 0..3u32 {
-            let sweep = murk_velodyne::synth::Sweep {
-                rpm: 600.0,
-                packets: (400.0 * 46.08 / model.block_period_us()).round() as usize,
-                start_azimuth_deg: 40.0 * f64::from(k),
-                model,
-                ..murk_velodyne::synth::Sweep::default()
-            };
-            std::fs::write(d.join("lidar").join(format!("r{k}.pcap")), sweep.to_pcap()).unwrap();
-            csv.push_str(&format!(
-                "r{k},2023-01-14T0{k}:00:00Z,Clear,0,20000,2.0,20000,0\n"
-            ));
-        }
-        std::fs::write(d.join("weather.csv"), csv).unwrap();
-        let campaign = Campaign::open(d).unwrap();
-        let inputs = murk_fit::observe::FitInputs::from_campaign(&campaign);
-        let got = murk_fit::observe::measure_geometry(&inputs).unwrap();
-        (dir, got)
+        let (dir, got) = pcap_geometry(spec, elevations, "", &sweep);
+        (dir, got.unwrap())
     };
     let name = model.name();
     let (_d, (g, warnings)) = write(&spec.elevation_deg);
@@ -490,43 +509,13 @@ fn pcap_recordings_are_measured_on_their_own_lasers(
 /// naming it and the key; with `pcap_return` it reads that return.
 #[test]
 fn dual_return_pcap_recordings_are_refused_until_the_campaign_names_a_return() {
-    let write = |extra: &str| {
-        let dir = tempfile::tempdir().unwrap();
-        let d = dir.path();
-        std::fs::create_dir_all(d.join("lidar")).unwrap();
-        let el: Vec<String> = murk_types::VLP16_ELEVATION_DEG
-            .iter()
-            .map(|e| format!("{e}"))
-            .collect();
-        std::fs::write(
-            d.join("campaign.toml"),
-            format!(
-                "name = \"dual\"\nrules = \"pdd-2022-2023\"\n[lidar]\nmodel = \"VLP16\"\nelevation_deg = [{}]\n{extra}",
-                el.join(", ")
-            ),
-        )
-        .unwrap();
-        let mut csv = String::from(
-            "recording,timestamp,PWD12_Weather Type,PWD12_Rain intensity (mm/h),PWD12_MOR (m),PWD12_Temperature (°C),VS2K_MOR (m),WXT530_Rain intensity (mm/h)\n",
-        );
-        for k in 0..3u32 {
-            let sweep = murk_velodyne::synth::Sweep {
-                packets: 600,
-                start_azimuth_deg: 40.0 * f64::from(k),
-                mode: murk_velodyne::ReturnMode::Dual,
-                ..murk_velodyne::synth::Sweep::default()
-            };
-            std::fs::write(d.join("lidar").join(format!("r{k}.pcap")), sweep.to_pcap()).unwrap();
-            csv.push_str(&format!(
-                "r{k},2023-01-14T0{k}:00:00Z,Clear,0,20000,2.0,20000,0\n"
-            ));
-        }
-        std::fs::write(d.join("weather.csv"), csv).unwrap();
-        let campaign = Campaign::open(d).unwrap();
-        let inputs = murk_fit::observe::FitInputs::from_campaign(&campaign);
-        let got = murk_fit::observe::measure_geometry(&inputs);
-        (dir, got)
+    let spec = murk_types::LidarSpec::vlp16();
+    let sweep = murk_velodyne::synth::Sweep {
+        packets: 600,
+        mode: murk_velodyne::ReturnMode::Dual,
+        ..murk_velodyne::synth::Sweep::default()
     };
+    let write = |extra: &str| pcap_geometry(&spec, &spec.elevation_deg, extra, &sweep);
     let (_d, got) = write("");
     let e = got.expect_err("both returns refused").to_string();
     assert!(

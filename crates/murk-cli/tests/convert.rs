@@ -218,12 +218,17 @@ fn a_bad_input_stops_with_its_name() {
     );
 }
 
-#[test]
-fn a_pcap_becomes_one_file_per_frame() {
-    let Some(pcap) = murk_types::real_data::real_data_file(
+/// The real VLP-16 capture, when present.
+fn real_capture() -> Option<std::path::PathBuf> {
+    murk_types::real_data::real_data_file(
         env!("CARGO_MANIFEST_DIR"),
         "vlp16-test-90deg-1-50-frames.pcap",
-    ) else {
+    )
+}
+
+#[test]
+fn a_pcap_becomes_one_file_per_frame() {
+    let Some(pcap) = real_capture() else {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
@@ -287,10 +292,7 @@ fn a_pcap_becomes_one_file_per_frame() {
 
 #[test]
 fn pcap_return_selects_a_return_the_capture_recorded() {
-    let Some(pcap) = murk_types::real_data::real_data_file(
-        env!("CARGO_MANIFEST_DIR"),
-        "vlp16-test-90deg-1-50-frames.pcap",
-    ) else {
+    let Some(pcap) = real_capture() else {
         return;
     };
     let dir = tempfile::tempdir().unwrap();

@@ -855,9 +855,11 @@ fn product_0x21_is_the_sensor_whose_packet_period_it_keeps() {
     );
 }
 
-/// HDL-32E packets (0x21 every 552.96 µs), blocks turning by `step`
-/// hundredths of a degree from 0°, without returns.
-fn hdl32e_packets(n: u32, step: u16) -> Vec<DataPacket> {
+/// Single-return packets of `model` (its product byte, at its packet
+/// period: HDL-32E 0x21 every 552.96 µs, VLP-32C 0x28 every 663.552 µs),
+/// blocks turning by `step` hundredths of a degree from 0°, without
+/// returns.
+fn model_packets(model: SensorModel, n: u32, step: u16) -> Vec<DataPacket> {
     (0..n)
         .map(|k| {
             let mut p = turning(
@@ -865,11 +867,15 @@ fn hdl32e_packets(n: u32, step: u16) -> Vec<DataPacket> {
                 (k * 12 * u32::from(step)) as u16,
                 step,
             );
-            p.product = 0x21;
-            p.timestamp_us = 5000 + (f64::from(k) * 552.96).round() as u32;
+            p.product = model.product();
+            p.timestamp_us = 5000 + (f64::from(k) * model.packet_period_us(false)).round() as u32;
             p
         })
         .collect()
+}
+
+fn hdl32e_packets(n: u32, step: u16) -> Vec<DataPacket> {
+    model_packets(SensorModel::Hdl32e, n, step)
 }
 
 #[test]
@@ -987,21 +993,8 @@ fn a_capture_mixing_hdl32e_packets_with_others_is_refused() {
     );
 }
 
-/// VLP-32C packets (0x28 every 663.552 µs), blocks turning by `step`
-/// hundredths of a degree from 0°, without returns.
 fn vlp32c_packets(n: u32, step: u16) -> Vec<DataPacket> {
-    (0..n)
-        .map(|k| {
-            let mut p = turning(
-                ReturnMode::Strongest,
-                (k * 12 * u32::from(step)) as u16,
-                step,
-            );
-            p.product = 0x28;
-            p.timestamp_us = 5000 + (f64::from(k) * 663.552).round() as u32;
-            p
-        })
-        .collect()
+    model_packets(SensorModel::Vlp32c, n, step)
 }
 
 #[test]
