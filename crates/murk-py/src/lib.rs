@@ -190,17 +190,24 @@ fn pool_err(e: String) -> PyErr {
 
 /// Reads a point-cloud file into a dict of numpy columns.
 #[pyfunction]
-#[pyo3(signature = (path, *, format=None, intensity_scale=None, frames=false))]
+#[pyo3(signature = (path, *, format=None, intensity_scale=None, frames=false, pcap_return=None))]
 fn read(
     py: Python<'_>,
     path: PathBuf,
     format: Option<&str>,
     intensity_scale: Option<&Bound<'_, PyAny>>,
     frames: bool,
+    pcap_return: Option<&str>,
 ) -> PyResult<Py<PyAny>> {
     let opts = ReadOptions {
         format: format_arg(format)?,
         intensity_scale: scale_arg(intensity_scale)?,
+        pcap_return: pcap_return
+            .map(|r| {
+                r.parse::<murk_types::PcapReturn>()
+                    .map_err(|e| input(format!("pcap_return: {e}")))
+            })
+            .transpose()?,
         ..ReadOptions::default()
     };
     let clouds = py

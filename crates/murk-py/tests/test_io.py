@@ -81,6 +81,21 @@ def test_pcap_frames():
     assert "time" in whole and whole["ring"].max() <= 15
 
 
+def test_pcap_return_is_a_return_the_capture_recorded(tmp_path):
+    # The real capture is single-return (strongest): its strongest returns
+    # are what it recorded; its last ones it does not have, and the error is
+    # the CLI's (file, packet).
+    path = real("vlp16-test-90deg-1-50-frames.pcap")
+    whole = murk.read(path)
+    strongest = murk.read(path, pcap_return="strongest")
+    for c in ("x", "y", "z", "intensity", "ring"):
+        np.testing.assert_array_equal(whole[c], strongest[c])
+    with pytest.raises(murk.FileError, match=r"vlp16-test-90deg-1-50-frames.pcap: packet \d+ .*asked for last returns"):
+        murk.read(path, pcap_return="last")
+    with pytest.raises(murk.InputError, match="pcap_return: .*strongest or last"):
+        murk.read(path, pcap_return="first")
+
+
 def test_read_errors(tmp_path):
     with pytest.raises(murk.FileError, match="missing.pcd"):
         murk.read(tmp_path / "missing.pcd")

@@ -71,10 +71,13 @@ def read(
     format: Optional[str] = None,
     intensity_scale: IntensityScaleArg = None,
     frames: Literal[False] = False,
+    pcap_return: Optional[Literal["strongest", "last"]] = None,
 ) -> Columns:
     """Read a point-cloud file (format from the extension, or ``format``: pcd, bin,
     nuscenes, csv, parquet, pcap) into numpy columns. Intensity is as stored (never
-    converted). ``frames=True`` gives one dict per revolution of a pcap. Raises FileError."""
+    converted). ``frames=True`` gives one dict per revolution of a pcap;
+    ``pcap_return`` reads one return of each firing from a dual-return pcap (default:
+    as recorded). Raises FileError."""
 
 @overload
 def read(
@@ -83,6 +86,7 @@ def read(
     format: Optional[str] = None,
     intensity_scale: IntensityScaleArg = None,
     frames: Literal[True],
+    pcap_return: Optional[Literal["strongest", "last"]] = None,
 ) -> List[Columns]: ...
 def write(
     path: PathLike,
