@@ -333,14 +333,20 @@ fn physics_fog_with_narrow_bands_meets_the_truth_of_their_reflectivities() {
 
 /// One and two threads give the same table bytes (the bend's folds and
 /// bootstraps are seeded per item, not per thread), with and without the
-/// reflectivity term.
+/// reflectivity term (chosen, and `k` changing with MOR compared). Half the
+/// physics campaign's fog recordings: enough for every choice to be made
+/// and tested, at half the cost of four fits on one thread.
 #[test]
 fn bent_tables_are_the_same_bytes_on_one_and_two_threads() {
     let Some(capture) = capture() else {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
-    semi_real::vlp16_campaign(&capture, dir.path(), &physics_cfg(), 4).unwrap();
+    let cfg = SemiRealConfig {
+        degraded: 20,
+        ..physics_cfg()
+    };
+    semi_real::vlp16_campaign(&capture, dir.path(), &cfg, 4).unwrap();
     let json = |threads: usize, fit: fn(&Path, u32, f64) -> FittedTable| {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
@@ -360,6 +366,16 @@ fn bent_tables_are_the_same_bytes_on_one_and_two_threads() {
     // parallel too).
     let (a, b) = (json(1, fit_reflectivity), json(2, fit_reflectivity));
     assert!(a.contains("\"reference\":"), "the term is in the law");
+    let t = murk_types::CoefficientTable::from_json(&a).unwrap();
+    let mor = t.weathers[&WeatherClass::Fog]
+        .law_choice
+        .as_ref()
+        .and_then(|c| c.reflectivity.as_ref()?.mor.as_ref())
+        .expect("k changing with MOR compared");
+    assert!(
+        mor.per_ln_mor.iter().all(Option::is_some),
+        "its g fitted in every band: {mor:?}"
+    );
     assert_eq!(a, b);
 }
 
@@ -603,7 +619,9 @@ fn fit_reflectivity(path: &Path, replicates: u32, mor_bin_m: f64) -> FittedTable
 /// A band's reflectivity term against the physics: asserts its `k` lies
 /// within the simulator's own `d ln R₅₀/d ln x` at the band's reference
 /// (over the covered bins' MORs, 10 % either side; a `k` that changes with
-/// MOR within 0.02 of it at each covered MOR), and returns, per
+/// MOR within 0.02 of it at each covered MOR, and its line in `ln MOR`
+/// within 0.05 of it at half the lowest and three and ten times the
+/// highest covered MOR), and returns, per
 /// covered bin and at the 10th, 50th and 90th percentiles of `xs` (the
 /// band's clear reflectivities), the MOR, the reflectivity and the law's
 /// relative error against the simulator's 50 % range of that reflectivity.
@@ -679,6 +697,35 @@ fn term_against_physics(
             b.reflectivity_min,
             b.reflectivity_max,
             pairs.join(", ")
+        );
+        // Beyond the fog recordings' MOR the law extends its line in
+        // `ln MOR`. Above, the simulator's `k` keeps growing (no
+        // flattening: at reflectivity 72, 0.144 at 30 m, 0.191 at 300 m,
+        // 0.233 at 1,000 m); below, it falls faster than the line (where
+        // `R₅₀` nears MOR: at reflectivity 5, 0.135 at 5 m, 0.078 at 2 m).
+        // The line must stay within 0.05 of it from half the lowest MOR to
+        // ten times the highest (holding `k` at the range's ends would be
+        // further off below, and above in most bands).
+        let (lo, hi) = covered
+            .iter()
+            .fold((f64::INFINITY, 0f64), |(a, c), &m| (a.min(m), c.max(m)));
+        let outside: Vec<String> = [lo / 2.0, hi * 3.0, hi * 10.0]
+            .into_iter()
+            .filter_map(|mor| {
+                let (fit, sim) = (term.exponent_at(mor), k_sim(mor)?);
+                assert!(
+                    (fit - sim).abs() < 0.05,
+                    "{what} band {} MOR {mor:.1} (fitted {lo:.1}–{hi:.1}): k {fit:.3} against the simulator's {sim:.3}",
+                    b.reflectivity_min
+                );
+                Some(format!("{mor:.0} m {fit:.3}/{sim:.3}"))
+            })
+            .collect();
+        eprintln!(
+            "  {what} band [{}, {:?}): k beyond the bins' MOR {lo:.1}–{hi:.1} m (law/simulator) {}",
+            b.reflectivity_min,
+            b.reflectivity_max,
+            outside.join(", ")
         );
     }
     covered
