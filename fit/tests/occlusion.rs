@@ -444,12 +444,15 @@ fn generated_near_returns_hide_and_are_not_read_as_replacement() {
     for seed in [2u64, 3, 4] {
         let mut c = GeneratorConfig::preset(Preset::Small);
         c.campaign.recordings = 40;
-        let dir = tempfile::tempdir().unwrap();
+        // In a folder of the temporary one, so that the truth written
+        // beside the campaign is removed with it.
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path().join("campaign");
         Generator::new(c)
             .unwrap()
-            .write_campaign(seed, &OutputOptions::new(dir.path()))
+            .write_campaign(seed, &OutputOptions::new(&dir))
             .unwrap();
-        let t = fit(dir.path());
+        let t = fit(&dir);
         for (w, c) in &t.table().weathers {
             let o = c.occlusion.as_ref().expect("the occlusion test");
             eprintln!("seed {seed} {w}: {o:?}");

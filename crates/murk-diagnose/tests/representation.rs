@@ -83,9 +83,11 @@ fn campaign(seed: u64, recordings: usize) -> (tempfile::TempDir, Campaign) {
     };
     Generator::new(c)
         .unwrap()
-        .write_campaign(seed, &OutputOptions::new(dir.path()))
+        .write_campaign(seed, &OutputOptions::new(dir.path().join("campaign")))
         .unwrap();
-    let campaign = Campaign::open(dir.path()).unwrap();
+    // The campaign in a folder of the temporary one: its truth goes beside
+    // it (`campaign.truth.json`), inside what the test removes.
+    let campaign = Campaign::open(dir.path().join("campaign")).unwrap();
     (dir, campaign)
 }
 
