@@ -678,25 +678,29 @@ fn term_against_physics(
             term.exponent
         );
     } else {
+        // The law's `k` against the simulator's at each of `mors`, within
+        // `tol`; "MOR k/k" pairs for the report.
+        let against = |mors: &[f64], tol: f64, at: &str| -> String {
+            mors.iter()
+                .filter_map(|&mor| {
+                    let (fit, sim) = (term.exponent_at(mor), k_sim(mor)?);
+                    assert!(
+                        (fit - sim).abs() < tol,
+                        "{what} band {} MOR {mor:.1} ({at}): k {fit:.3} against the simulator's {sim:.3}",
+                        b.reflectivity_min
+                    );
+                    Some(format!("{mor:.0} m {fit:.3}/{sim:.3}"))
+                })
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
         // An exponent that changes with MOR follows the simulator's at
         // each MOR, not only over the range.
-        let pairs: Vec<String> = covered
-            .iter()
-            .filter_map(|&mor| {
-                let (fit, sim) = (term.exponent_at(mor), k_sim(mor)?);
-                assert!(
-                    (fit - sim).abs() < 0.02,
-                    "{what} band {} MOR {mor:.1}: k {fit:.3} against the simulator's {sim:.3}",
-                    b.reflectivity_min
-                );
-                Some(format!("{mor:.0} m {fit:.3}/{sim:.3}"))
-            })
-            .collect();
         eprintln!(
             "  {what} band [{}, {:?}): k by MOR (law/simulator) {}",
             b.reflectivity_min,
             b.reflectivity_max,
-            pairs.join(", ")
+            against(&covered, 0.02, "a covered bin")
         );
         // Beyond the fog recordings' MOR the law extends its line in
         // `ln MOR`. Above, the simulator's `k` keeps growing (no
@@ -709,23 +713,12 @@ fn term_against_physics(
         let (lo, hi) = covered
             .iter()
             .fold((f64::INFINITY, 0f64), |(a, c), &m| (a.min(m), c.max(m)));
-        let outside: Vec<String> = [lo / 2.0, hi * 3.0, hi * 10.0]
-            .into_iter()
-            .filter_map(|mor| {
-                let (fit, sim) = (term.exponent_at(mor), k_sim(mor)?);
-                assert!(
-                    (fit - sim).abs() < 0.05,
-                    "{what} band {} MOR {mor:.1} (fitted {lo:.1}–{hi:.1}): k {fit:.3} against the simulator's {sim:.3}",
-                    b.reflectivity_min
-                );
-                Some(format!("{mor:.0} m {fit:.3}/{sim:.3}"))
-            })
-            .collect();
+        let beyond = format!("beyond the bins' {lo:.1}–{hi:.1} m");
         eprintln!(
-            "  {what} band [{}, {:?}): k beyond the bins' MOR {lo:.1}–{hi:.1} m (law/simulator) {}",
+            "  {what} band [{}, {:?}): k {beyond} (law/simulator) {}",
             b.reflectivity_min,
             b.reflectivity_max,
-            outside.join(", ")
+            against(&[lo / 2.0, hi * 3.0, hi * 10.0], 0.05, &beyond)
         );
     }
     covered

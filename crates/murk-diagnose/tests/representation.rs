@@ -81,13 +81,14 @@ fn campaign(seed: u64, recordings: usize) -> (tempfile::TempDir, Campaign) {
         rain: 0.0,
         snow: 0.0,
     };
-    Generator::new(c)
-        .unwrap()
-        .write_campaign(seed, &OutputOptions::new(dir.path().join("campaign")))
-        .unwrap();
     // The campaign in a folder of the temporary one: its truth goes beside
     // it (`campaign.truth.json`), inside what the test removes.
-    let campaign = Campaign::open(dir.path().join("campaign")).unwrap();
+    let path = dir.path().join("campaign");
+    Generator::new(c)
+        .unwrap()
+        .write_campaign(seed, &OutputOptions::new(&path))
+        .unwrap();
+    let campaign = Campaign::open(&path).unwrap();
     (dir, campaign)
 }
 
