@@ -33,6 +33,7 @@ use sha2::{Digest, Sha256};
 
 use crate::accumulate::{CellTable, WeatherAcc};
 use crate::geometry::GeometryAcc;
+use crate::images::{ClearImages, StoredImage};
 use crate::pairing::pair_frames;
 use crate::radar::Detections;
 use crate::reference::{CellGrid, CellImage, CellPoint, ClearReference, cell_points};
@@ -386,24 +387,38 @@ fn no_points(r: &RecordingInput) -> ExcludedRecording {
     }
 }
 
-/// The cell image of every recording of `recs` (read in parallel; `None`
-/// when its file holds no point) and its file's SHA-256, in the order of
-/// `recs`; the error of the first bad recording in that order.
-pub fn clear_images(
+/// The cell image of every recording of `recs` (`None` when its file holds
+/// no point), put in `store` as it is read, and its file's SHA-256, in the
+/// order of `recs`; the error of the first bad recording in that order.
+///
+/// Read in parallel a few recordings at a time (four per thread), so that
+/// what is held at once is those recordings' points and the store's
+/// budget, not every clear recording's image.
+pub(crate) fn clear_images(
     inputs: &FitInputs,
     recs: &[&RecordingInput],
     grid: &CellGrid,
-) -> Result<Vec<(Option<CellImage>, String)>, FitError> {
-    let images: Vec<Result<(Option<CellImage>, String), FitError>> = recs
-        .par_iter()
-        .map(|r| {
-            let (points, frames, digest) = read_lidar_frames(&r.lidar, &inputs.lidar, grid)?;
-            let img =
-                (!points.is_empty()).then(|| CellImage::from_frames(&points, frames, grid.cells()));
-            Ok((img, digest))
-        })
-        .collect();
-    images.into_iter().collect()
+    store: &mut ClearImages,
+) -> Result<Vec<(Option<StoredImage>, String)>, FitError> {
+    let chunk = 4 * rayon::current_num_threads().max(1);
+    let mut out = Vec::with_capacity(recs.len());
+    for part in recs.chunks(chunk) {
+        let images: Vec<Result<(Option<CellImage>, String), FitError>> = part
+            .par_iter()
+            .map(|r| {
+                let (points, frames, digest) = read_lidar_frames(&r.lidar, &inputs.lidar, grid)?;
+                let img = (!points.is_empty())
+                    .then(|| CellImage::from_frames(&points, frames, grid.cells()));
+                Ok((img, digest))
+            })
+            .collect();
+        for r in images {
+            let (img, digest) = r?;
+            let img = img.map(|i| store.store(i)).transpose()?;
+            out.push((img, digest));
+        }
+    }
+    Ok(out)
 }
 
 /// The exclusion of a recording whose file holds no point.

@@ -128,7 +128,8 @@
 #![deny(missing_docs)]
 
 mod accumulate;
-// File I/O is allowed here and in `driver` only (fit/clippy.toml).
+// File I/O is allowed here, in `driver`, `images` and `state` only
+// (fit/clippy.toml).
 #[allow(clippy::disallowed_methods, clippy::disallowed_types)]
 mod algorithm;
 mod assemble;
@@ -139,6 +140,9 @@ mod driver;
 mod error;
 mod geometry;
 mod hyperparams;
+// Spills clear images to a temporary file (fit/clippy.toml).
+#[allow(clippy::disallowed_methods, clippy::disallowed_types)]
+mod images;
 pub mod observe;
 mod occlusion;
 mod pairing;
@@ -161,6 +165,10 @@ pub use driver::{FitInputs, RecordingInput};
 pub use error::FitError;
 pub use hyperparams::{
     Band, DEFAULT_REFLECTIVITY_LAW_EDGES, EdgeShape, FitParams, FitValidParams, parse_edge,
+};
+pub use images::{
+    DEFAULT_CLEAR_IMAGE_MEMORY, clear_image_dir, clear_image_memory, set_clear_image_dir,
+    set_clear_image_memory,
 };
 pub use state::{ClearPart, FitState, STATE_FORMAT, Selection};
 /// The one-dimensional bounded minimiser (Brent's method) that profiles the

@@ -234,7 +234,7 @@ impl AsRef<CellImage> for CellImage {
 
 /// `img` with its cells in ascending order (duplicates kept, in their
 /// order).
-fn sorted_image(img: &CellImage) -> CellImage {
+pub(crate) fn sorted_image(img: &CellImage) -> CellImage {
     let mut idx: Vec<usize> = (0..img.cells.len()).collect();
     idx.sort_by_key(|&j| img.cells[j]);
     CellImage {
@@ -354,7 +354,7 @@ impl ClearReference {
         params: &FitValidParams,
     ) -> ClearReference {
         let images: Vec<&CellImage> = images.iter().map(AsRef::as_ref).collect();
-        // The blocks below walk each image's cells in ascending order (as
+        // The build reads each image's cells in ascending order (as
         // `CellImage` promises); an image from elsewhere (a state file) that
         // is not is sorted first.
         let sorted: Vec<Option<CellImage>> = images
@@ -366,17 +366,32 @@ impl ClearReference {
             .zip(&sorted)
             .map(|(&img, s)| s.as_ref().unwrap_or(img))
             .collect();
+        let Ok(reference) = ClearReference::build_from(grid, &MemoryImages(images), params);
+        reference
+    }
+
+    /// Builds the reference from images read through `src` (see
+    /// [`ClearReference::build`] for the rule).
+    ///
+    /// The images are read once, a block of whole rings at a time: every
+    /// recording's entries of the block's cells (a cursor per recording,
+    /// [`READ_CHUNK`] entries of lookahead), the cells' medians, and each
+    /// recording scored against the reference without it on those rings
+    /// (the leave-one-out matching is per ring). What the build holds is
+    /// per cell, per recording, and one block's entries (at most about
+    /// [`BLOCK_ENTRIES`], or one ring of every recording), not every
+    /// recording's image: with the images in a file ([`crate::images`]) its
+    /// memory does not grow with the number of clear recordings but for a
+    /// few bytes each.
+    pub(crate) fn build_from<S: ImageSource>(
+        grid: CellGrid,
+        src: &S,
+        params: &FitValidParams,
+    ) -> Result<ClearReference, S::Error> {
         let n_cells = grid.cells();
-        let n = images.len();
-        let frames: Vec<u64> = images.iter().map(|i| i.frames.max(1) as u64).collect();
+        let n = src.count();
+        let frames: Vec<u64> = (0..n).map(|i| src.frames(i).max(1) as u64).collect();
         let all_frames: u64 = frames.iter().sum();
-        // Entry `first[i] + j` is image i's j-th cell (image order).
-        let mut first = Vec::with_capacity(n + 1);
-        first.push(0usize);
-        for img in &images {
-            first.push(first[first.len() - 1] + img.cells.len());
-        }
-        let total = first[n];
 
         let mut reference = ClearReference {
             grid,
@@ -394,88 +409,81 @@ impl ClearReference {
         };
         let min_presence = params.reference_min_presence();
         let min_agreement = params.reference_min_agreement();
-        // What the leave-one-out pass needs per cell: stable, its median and
-        // expected hits per scan, its hit sum; per entry, the cell's median
-        // without that entry's recording (NaN when no other recording hit
-        // the cell).
-        let mut loo_cells = LooCells {
+        // What the leave-one-out scoring needs per cell: stable, its median
+        // and expected hits per scan, its hit sum (the per-entry medians
+        // without the entry's recording are the block's).
+        let mut cells = LooCells {
             stable: vec![false; n_cells],
             median: vec![f32::NAN; n_cells],
             h: vec![0; n_cells],
             hit_sum: vec![0; n_cells],
-            median_without: vec![f32::NAN; total],
-            slack_without: vec![0; total],
             gradient_slack: vec![0.0; n_cells],
         };
+        let mut block = Block::default();
+        let mut readers: Vec<Reader> = (0..n).map(|_| Reader::default()).collect();
         let mut order: Vec<usize> = Vec::new();
         let mut rs: Vec<f32> = Vec::new();
         let mut fs: Vec<f32> = Vec::new();
         let mut hs: Vec<u32> = Vec::new();
         let mut dev: Vec<f32> = Vec::new();
-        // Per cell, the entries of every recording that hit it, in
-        // recording order, gathered a block of cells at a time: the images
-        // are the campaign's largest summaries (16 bytes per clear
-        // recording and occupied cell), and a transposed copy of all of
-        // them would more than double what building holds.
-        const BLOCK: usize = 4096;
-        let mut cursor = vec![0usize; n];
-        let mut start = vec![0usize; BLOCK + 1];
-        let mut fill = vec![0usize; BLOCK];
-        // (recording, position in its image) per entry of the block.
-        let mut ent: Vec<(u32, u32)> = Vec::new();
-        let (mut e_rec, mut e_r, mut e_f, mut e_h, mut e_k) =
-            (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
-        for c0 in (0..n_cells).step_by(BLOCK) {
-            let c1 = (c0 + BLOCK).min(n_cells);
-            start.iter_mut().for_each(|x| *x = 0);
-            for (i, img) in images.iter().enumerate() {
-                for &c in img.cells[cursor[i]..]
-                    .iter()
-                    .take_while(|&&c| (c as usize) < c1)
-                {
-                    start[c as usize - c0 + 1] += 1;
-                }
+        let mut start: Vec<usize> = Vec::new();
+        let mut fill: Vec<usize> = Vec::new();
+        // Per cell of the block, the entries of every recording that hit
+        // it, in recording order (indices into `block.entries`).
+        let mut by_cell: Vec<u32> = Vec::new();
+        let mut scorer = Scorer::new(n_cells, params);
+        let rings = reference.grid.rings.clone();
+        let mut r0 = 0;
+        while r0 < rings.len() {
+            let c0 = rings[r0].offset;
+            let mut r1 = r0 + 1;
+            while r1 < rings.len()
+                && (rings[r1].offset + rings[r1].bins - c0).saturating_mul(n) <= BLOCK_ENTRIES
+            {
+                r1 += 1;
+            }
+            let c1 = rings[r1 - 1].offset + rings[r1 - 1].bins;
+            block.entries.clear();
+            block.start.clear();
+            block.start.push(0);
+            for (i, reader) in readers.iter_mut().enumerate() {
+                reader.take_below(src, i, c1, &mut block.entries)?;
+                block.start.push(block.entries.len());
+            }
+            let total = block.entries.len();
+            start.clear();
+            start.resize(c1 - c0 + 1, 0);
+            for e in &block.entries {
+                start[e.cell as usize - c0 + 1] += 1;
             }
             for k in 0..c1 - c0 {
                 start[k + 1] += start[k];
             }
-            fill[..c1 - c0].copy_from_slice(&start[..c1 - c0]);
-            ent.clear();
-            ent.resize(start[c1 - c0], (0, 0));
-            for (i, img) in images.iter().enumerate() {
-                let mut q = cursor[i];
-                while q < img.cells.len() && (img.cells[q] as usize) < c1 {
-                    let k = &mut fill[img.cells[q] as usize - c0];
-                    ent[*k] = (i as u32, q as u32);
-                    *k += 1;
-                    q += 1;
-                }
-                cursor[i] = q;
+            fill.clear();
+            fill.extend_from_slice(&start[..c1 - c0]);
+            by_cell.clear();
+            by_cell.resize(total, 0);
+            for (k, e) in block.entries.iter().enumerate() {
+                let at = &mut fill[e.cell as usize - c0];
+                by_cell[*at] = k as u32;
+                *at += 1;
             }
+            block.median_without.clear();
+            block.median_without.resize(total, f32::NAN);
+            block.slack_without.clear();
+            block.slack_without.resize(total, 0);
             for c in c0..c1 {
-                let (a, b) = (start[c - c0], start[c - c0 + 1]);
-                let m = b - a;
+                let ks = &by_cell[start[c - c0]..start[c - c0 + 1]];
+                let m = ks.len();
                 if m == 0 {
                     continue;
                 }
-                e_rec.clear();
-                e_r.clear();
-                e_f.clear();
-                e_h.clear();
-                e_k.clear();
-                for &(i, q) in &ent[a..b] {
-                    let (img, q) = (images[i as usize], q as usize);
-                    e_rec.push(i);
-                    e_r.push(img.range[q]);
-                    e_f.push(img.reflectivity[q]);
-                    e_h.push(img.hits[q]);
-                    e_k.push(first[i as usize] + q);
-                }
+                let entry = |x: usize| &block.entries[ks[x] as usize];
                 rs.clear();
-                rs.extend_from_slice(&e_r);
+                rs.extend((0..m).map(|x| entry(x).range));
                 order.clear();
                 order.extend(0..m);
-                order.sort_by(|&i, &j| e_r[i].total_cmp(&e_r[j]).then(i.cmp(&j)));
+                order.sort_by(|&x, &y| entry(x).range.total_cmp(&entry(y).range).then(x.cmp(&y)));
                 rs.sort_by(f32::total_cmp);
                 reference.env_lo[c] = rs[0];
                 reference.env_hi[c] = rs[m - 1];
@@ -492,16 +500,17 @@ impl ClearReference {
                     median_f32(&mut dev) <= tol
                 };
                 hs.clear();
-                hs.extend((0..m).map(|k| {
-                    let f = frames[e_rec[k] as usize];
-                    ((e_h[k] as u64 + f / 2) / f).max(1) as u32
+                hs.extend((0..m).map(|x| {
+                    let k = ks[x] as usize;
+                    let f = frames[block.recording_of(k)];
+                    ((block.entries[k].hits as u64 + f / 2) / f).max(1) as u32
                 }));
                 hs.sort_unstable();
                 let h = hs[(m - 1) / 2].max(1);
-                let hit_sum: u64 = e_h.iter().map(|&x| x as u64).sum();
+                let hit_sum: u64 = (0..m).map(|x| entry(x).hits as u64).sum();
                 if stable && presence_holds(min_presence, h, all_frames as f64, hit_sum as f64) {
                     fs.clear();
-                    fs.extend_from_slice(&e_f);
+                    fs.extend((0..m).map(|x| entry(x).reflectivity));
                     reference.range[c] = med;
                     reference.reflectivity[c] = median_f32(&mut fs);
                     reference.hits[c] = h.min(u16::MAX as u32) as u16;
@@ -510,61 +519,56 @@ impl ClearReference {
                 if stable {
                     reference.slack[c] = agreeing_slack(&rs, None, med, tol);
                 }
-                loo_cells.stable[c] = stable;
-                loo_cells.median[c] = med;
-                loo_cells.h[c] = h;
-                loo_cells.hit_sum[c] = hit_sum;
+                cells.stable[c] = stable;
+                cells.median[c] = med;
+                cells.h[c] = h;
+                cells.hit_sum[c] = hit_sum;
                 if m >= 2 {
-                    for (pos, &i) in order.iter().enumerate() {
+                    for (pos, &x) in order.iter().enumerate() {
+                        let k = ks[x] as usize;
                         let m_without = median_without(&rs, pos);
-                        loo_cells.median_without[e_k[i]] = m_without;
+                        block.median_without[k] = m_without;
                         if stable {
                             let tol = params.pairing_tolerance(m_without as f64) as f32;
                             let slack = agreeing_slack(&rs, Some(pos), m_without, tol);
-                            loo_cells.slack_without[e_k[i]] = slack_cm(slack);
+                            block.slack_without[k] = slack_cm(slack);
                         }
                     }
                 }
             }
-        }
-        // The range a cell's firings can read as they wander across it: the
-        // gradient along the ring (from the stable neighbours' medians:
-        // the central difference, or the one side there is) times the
-        // ring's wander, at most the tolerance (at a depth edge the
-        // "gradient" is the jump, and the cap keeps the window within
-        // twice the tolerance there).
-        for ring in &reference.grid.rings {
-            let at = |p: i64| {
-                let c = ring.offset + p.rem_euclid(ring.bins as i64) as usize;
-                (loo_cells.stable[c] && ring.bins > 2).then_some(loo_cells.median[c])
-            };
-            for p in 0..ring.bins {
-                let c = ring.offset + p;
-                let Some(r) = at(p as i64) else {
-                    continue;
+            // The range a cell's firings can read as they wander across it:
+            // the gradient along the ring (from the stable neighbours'
+            // medians: the central difference, or the one side there is)
+            // times the ring's wander, at most the tolerance (at a depth
+            // edge the "gradient" is the jump, and the cap keeps the window
+            // within twice the tolerance there).
+            for ring in &rings[r0..r1] {
+                let at = |p: i64| {
+                    let c = ring.offset + p.rem_euclid(ring.bins as i64) as usize;
+                    (cells.stable[c] && ring.bins > 2).then_some(cells.median[c])
                 };
-                let step = match (at(p as i64 - 1), at(p as i64 + 1)) {
-                    (Some(a), Some(b)) => (b - a).abs() / 2.0,
-                    (Some(a), None) | (None, Some(a)) => (r - a).abs(),
-                    (None, None) => 0.0,
-                };
-                let tol = params.pairing_tolerance(r as f64) as f32;
-                let wander = (ring.wander as f32 * step).min(tol);
-                loo_cells.gradient_slack[c] = wander;
-                reference.slack[c] = reference.slack[c].max(wander);
+                for p in 0..ring.bins {
+                    let c = ring.offset + p;
+                    let Some(r) = at(p as i64) else {
+                        continue;
+                    };
+                    let step = match (at(p as i64 - 1), at(p as i64 + 1)) {
+                        (Some(a), Some(b)) => (b - a).abs() / 2.0,
+                        (Some(a), None) | (None, Some(a)) => (r - a).abs(),
+                        (None, None) => 0.0,
+                    };
+                    let tol = params.pairing_tolerance(r as f64) as f32;
+                    let wander = (ring.wander as f32 * step).min(tol);
+                    cells.gradient_slack[c] = wander;
+                    reference.slack[c] = reference.slack[c].max(wander);
+                }
             }
+            if n >= 2 {
+                scorer.score_block(&mut reference, &rings[r0..r1], &block, &cells, all_frames);
+            }
+            r0 = r1;
         }
-        if n >= 2 {
-            leave_one_out(
-                &mut reference,
-                &images,
-                &first,
-                &loo_cells,
-                all_frames,
-                params,
-            );
-        }
-        reference
+        Ok(reference)
     }
 
     /// The grid.
@@ -676,7 +680,7 @@ impl ClearReference {
     }
 }
 
-/// What the leave-one-out pass reads per cell (and per entry).
+/// What the leave-one-out scoring reads per cell.
 struct LooCells {
     /// The cell's clear ranges agree (`reference_min_agreement` of them
     /// within the pairing tolerance of their median).
@@ -687,16 +691,151 @@ struct LooCells {
     h: Vec<u32>,
     /// Returns of every clear recording in the cell.
     hit_sum: Vec<u64>,
-    /// Per entry (a recording's hit of a cell): the cell's median without
-    /// that recording, NaN when no other recording hit the cell.
-    median_without: Vec<f32>,
-    /// Per entry of a stable cell: the slack of the other recordings'
-    /// agreeing ranges about `median_without`, in whole centimetres rounded
-    /// up (two bytes per entry: this array is as long as all clear images).
-    slack_without: Vec<u16>,
     /// Per stable cell: the range its firings read as they wander across
     /// it (the ring's gradient times its wander, at most the tolerance).
     gradient_slack: Vec<f32>,
+}
+
+/// One entry of a cell image: a clear recording's returns in one cell.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct ImageEntry {
+    /// The cell.
+    pub cell: u32,
+    /// Median range of its returns, metres.
+    pub range: f32,
+    /// Median calibrated reflectivity of its returns.
+    pub reflectivity: f32,
+    /// Number of returns.
+    pub hits: u32,
+}
+
+/// The clear recordings' cell images as [`ClearReference::build_from`]
+/// reads them: each image's entries in ascending cell order, a run at a
+/// time, so that they can sit in memory or in a file.
+pub(crate) trait ImageSource {
+    /// A failed read.
+    type Error;
+    /// Number of images (clear recordings).
+    fn count(&self) -> usize;
+    /// Scans image `i` was made from (0 read as 1).
+    fn frames(&self, i: usize) -> u32;
+    /// Entries of image `i`.
+    fn len(&self, i: usize) -> usize;
+    /// Appends entries `from .. from + n` of image `i` to `out`.
+    fn read(
+        &self,
+        i: usize,
+        from: usize,
+        n: usize,
+        out: &mut Vec<ImageEntry>,
+    ) -> Result<(), Self::Error>;
+}
+
+/// Images in memory, each with its cells ascending.
+struct MemoryImages<'a>(Vec<&'a CellImage>);
+
+impl ImageSource for MemoryImages<'_> {
+    type Error = std::convert::Infallible;
+
+    fn count(&self) -> usize {
+        self.0.len()
+    }
+
+    fn frames(&self, i: usize) -> u32 {
+        self.0[i].frames
+    }
+
+    fn len(&self, i: usize) -> usize {
+        self.0[i].cells.len()
+    }
+
+    fn read(
+        &self,
+        i: usize,
+        from: usize,
+        n: usize,
+        out: &mut Vec<ImageEntry>,
+    ) -> Result<(), Self::Error> {
+        let img = self.0[i];
+        out.extend((from..from + n).map(|q| ImageEntry {
+            cell: img.cells[q],
+            range: img.range[q],
+            reflectivity: img.reflectivity[q],
+            hits: img.hits[q],
+        }));
+        Ok(())
+    }
+}
+
+/// Entries read ahead per recording while the reference is built (16
+/// bytes each: 4 kB per clear recording).
+pub(crate) const READ_CHUNK: usize = 256;
+
+/// About how many entries (cells × clear recordings) one block of the
+/// build holds; a block is at least one ring.
+pub(crate) const BLOCK_ENTRIES: usize = 1 << 20;
+
+/// A cursor into one recording's image.
+#[derive(Default)]
+struct Reader {
+    buf: Vec<ImageEntry>,
+    pos: usize,
+    /// The next entry of the image to read into `buf`.
+    next: usize,
+}
+
+impl Reader {
+    /// Moves the image's entries of cells below `end` to `out`.
+    fn take_below<S: ImageSource>(
+        &mut self,
+        src: &S,
+        i: usize,
+        end: usize,
+        out: &mut Vec<ImageEntry>,
+    ) -> Result<(), S::Error> {
+        loop {
+            if self.pos == self.buf.len() {
+                let len = src.len(i);
+                if self.next >= len {
+                    return Ok(());
+                }
+                let m = READ_CHUNK.min(len - self.next);
+                self.buf.clear();
+                src.read(i, self.next, m, &mut self.buf)?;
+                self.next += m;
+                self.pos = 0;
+                continue;
+            }
+            let e = self.buf[self.pos];
+            if e.cell as usize >= end {
+                return Ok(());
+            }
+            out.push(e);
+            self.pos += 1;
+        }
+    }
+}
+
+/// The entries of one block of rings, recording by recording.
+#[derive(Default)]
+struct Block {
+    entries: Vec<ImageEntry>,
+    /// Recording `i`'s entries are `start[i] .. start[i + 1]`.
+    start: Vec<usize>,
+    /// Per entry: the cell's median without the entry's recording (NaN
+    /// when no other recording hit the cell).
+    median_without: Vec<f32>,
+    /// Per entry of a stable cell: the slack of the other recordings'
+    /// agreeing ranges about `median_without`, in whole centimetres
+    /// rounded up.
+    slack_without: Vec<u16>,
+}
+
+impl Block {
+    /// The recording of entry `k`.
+    fn recording_of(&self, k: usize) -> usize {
+        self.start.partition_point(|&s| s <= k) - 1
+    }
 }
 
 /// How far the ranges of sorted `rs` (leaving out position `skip`) that lie
@@ -740,85 +879,112 @@ fn presence_holds(min_presence: f64, h: u32, frames: f64, hits: f64) -> bool {
 /// pairs whole: a chain of shifts along the ring, not a loss at every range
 /// edge. The ring is matched as a path from its first bin: at most one pair
 /// across the seam is missed.
-///
-/// Fills `loo` (per recording) and `cell_loo` (per reference cell). Entry
-/// `first[i] + j` of `cells.median_without` is image `i`'s `j`-th cell.
-fn leave_one_out(
-    reference: &mut ClearReference,
-    images: &[&CellImage],
-    first: &[usize],
-    cells: &LooCells,
-    all_frames: u64,
-    params: &FitValidParams,
-) {
-    let n_cells = reference.grid.cells();
-    let min_presence = params.reference_min_presence();
-    let mut rec_range = vec![f32::NAN; n_cells];
-    let mut rec_hits = vec![0u32; n_cells];
-    let mut rec_entry = vec![u32::MAX; n_cells];
-    let mut matcher = RingMatcher::new(params.azimuth_neighbours() as usize);
-    let rings = reference.grid.rings.clone();
-    for (i, img) in images.iter().enumerate() {
-        let f = reference.frames[i];
-        for (j, &c) in img.cells.iter().enumerate() {
-            rec_range[c as usize] = img.range[j];
-            rec_hits[c as usize] = img.hits[j];
-            rec_entry[c as usize] = (first[i] + j) as u32;
+struct Scorer {
+    min_presence: f64,
+    params: FitValidParams,
+    /// The recording being scored, per cell: its median range, hits and
+    /// entry of the block (`u32::MAX` where it has none).
+    rec_range: Vec<f32>,
+    rec_hits: Vec<u32>,
+    rec_entry: Vec<u32>,
+    matcher: RingMatcher,
+}
+
+impl Scorer {
+    fn new(n_cells: usize, params: &FitValidParams) -> Scorer {
+        Scorer {
+            min_presence: params.reference_min_presence(),
+            params: params.clone(),
+            rec_range: vec![f32::NAN; n_cells],
+            rec_hits: vec![0; n_cells],
+            rec_entry: vec![u32::MAX; n_cells],
+            matcher: RingMatcher::new(params.azimuth_neighbours() as usize),
         }
-        let frames_without = (all_frames - f) as f64;
-        for ring in &rings {
-            matcher.clear();
-            for p in 0..ring.bins {
-                let c = ring.offset + p;
-                let (median, slack, ok) = if !cells.stable[c] {
-                    (f32::NAN, 0.0, false)
-                } else if rec_entry[c] != u32::MAX {
-                    let k = rec_entry[c] as usize;
-                    let med = cells.median_without[k];
-                    let hits_without = (cells.hit_sum[c] - rec_hits[c] as u64) as f64;
-                    let ok = med.is_finite()
-                        && presence_holds(min_presence, cells.h[c], frames_without, hits_without);
-                    let slack =
-                        (f32::from(cells.slack_without[k]) / 100.0).max(cells.gradient_slack[c]);
-                    (med, slack, ok)
-                } else {
-                    let ok = presence_holds(
-                        min_presence,
-                        cells.h[c],
-                        frames_without,
-                        cells.hit_sum[c] as f64,
-                    );
-                    (cells.median[c], reference.slack[c], ok)
-                };
-                matcher.reference.push(if ok {
-                    Some(RefCell {
-                        range: median,
-                        tol: params.pairing_tolerance(median as f64) as f32 + slack,
-                        expected: cells.h[c] as u64 * f,
-                    })
-                } else {
-                    None
-                });
-                matcher
-                    .returns
-                    .push((rec_entry[c] != u32::MAX).then(|| (rec_range[c], rec_hits[c] as u64)));
+    }
+
+    /// Adds every recording's scores on `rings` (the block's) to `loo`
+    /// (per recording) and `cell_loo` (per reference cell).
+    fn score_block(
+        &mut self,
+        reference: &mut ClearReference,
+        rings: &[RingBins],
+        block: &Block,
+        cells: &LooCells,
+        all_frames: u64,
+    ) {
+        let (min_presence, params) = (self.min_presence, &self.params);
+        for i in 0..reference.loo.len() {
+            let f = reference.frames[i];
+            let own = &block.entries[block.start[i]..block.start[i + 1]];
+            for (j, e) in own.iter().enumerate() {
+                let c = e.cell as usize;
+                self.rec_range[c] = e.range;
+                self.rec_hits[c] = e.hits;
+                self.rec_entry[c] = (block.start[i] + j) as u32;
             }
-            matcher.solve();
-            for p in 0..ring.bins {
-                if let Some(r) = matcher.reference[p] {
+            let frames_without = (all_frames - f) as f64;
+            for ring in rings {
+                let matcher = &mut self.matcher;
+                matcher.clear();
+                for p in 0..ring.bins {
                     let c = ring.offset + p;
-                    let kept = matcher.kept[p];
-                    reference.loo[i].0 += kept;
-                    reference.loo[i].1 += r.expected;
-                    reference.cell_loo[c].0 += kept;
-                    reference.cell_loo[c].1 += r.expected;
+                    let (median, slack, ok) = if !cells.stable[c] {
+                        (f32::NAN, 0.0, false)
+                    } else if self.rec_entry[c] != u32::MAX {
+                        let k = self.rec_entry[c] as usize;
+                        let med = block.median_without[k];
+                        let hits_without = (cells.hit_sum[c] - self.rec_hits[c] as u64) as f64;
+                        let ok = med.is_finite()
+                            && presence_holds(
+                                min_presence,
+                                cells.h[c],
+                                frames_without,
+                                hits_without,
+                            );
+                        let slack = (f32::from(block.slack_without[k]) / 100.0)
+                            .max(cells.gradient_slack[c]);
+                        (med, slack, ok)
+                    } else {
+                        let ok = presence_holds(
+                            min_presence,
+                            cells.h[c],
+                            frames_without,
+                            cells.hit_sum[c] as f64,
+                        );
+                        (cells.median[c], reference.slack[c], ok)
+                    };
+                    matcher.reference.push(if ok {
+                        Some(RefCell {
+                            range: median,
+                            tol: params.pairing_tolerance(median as f64) as f32 + slack,
+                            expected: cells.h[c] as u64 * f,
+                        })
+                    } else {
+                        None
+                    });
+                    matcher.returns.push(
+                        (self.rec_entry[c] != u32::MAX)
+                            .then(|| (self.rec_range[c], self.rec_hits[c] as u64)),
+                    );
+                }
+                matcher.solve();
+                for p in 0..ring.bins {
+                    if let Some(r) = matcher.reference[p] {
+                        let c = ring.offset + p;
+                        let kept = matcher.kept[p];
+                        reference.loo[i].0 += kept;
+                        reference.loo[i].1 += r.expected;
+                        reference.cell_loo[c].0 += kept;
+                        reference.cell_loo[c].1 += r.expected;
+                    }
                 }
             }
-        }
-        for &c in &img.cells {
-            rec_range[c as usize] = f32::NAN;
-            rec_hits[c as usize] = 0;
-            rec_entry[c as usize] = u32::MAX;
+            for e in own {
+                let c = e.cell as usize;
+                self.rec_range[c] = f32::NAN;
+                self.rec_hits[c] = 0;
+                self.rec_entry[c] = u32::MAX;
+            }
         }
     }
 }

@@ -80,6 +80,7 @@ use crate::driver::{
     DegradedJob, FitInputs, RecordingInput, accumulate_degraded, clear_images, measure_geometry,
     read_file, read_radar, relative, sha256_hex,
 };
+use crate::images::{ClearImages, StoredImage, StoredImages};
 use crate::radar::Detections;
 use crate::reference::{CellGrid, CellImage, ClearReference};
 use crate::survival::Partition;
@@ -211,8 +212,9 @@ struct Header {
 struct ClearEntry {
     /// SHA-256 of its file.
     digest: String,
-    /// Its cell image; `None` when the file holds no point.
-    image: Option<CellImage>,
+    /// Its cell image (in memory, or in the map's temporary file: see
+    /// [`crate::images`]); `None` when the file holds no point.
+    image: Option<StoredImage>,
 }
 
 /// One mapped degraded recording.
@@ -300,7 +302,7 @@ impl ClearPart {
         state.clear_sha256();
         for e in state.body.clear.values_mut() {
             if let Some(image) = &mut e.image {
-                *image = CellImage::default();
+                *image = StoredImage::memory(CellImage::default());
             }
         }
         state.released = true;
@@ -649,7 +651,7 @@ impl FitState {
                 let grid = grid_of(&geometry.0, inputs, params);
                 let recs: Vec<&RecordingInput> =
                     picked.iter().map(|&i| &inputs.recordings[i]).collect();
-                let images = clear_images(inputs, &recs, &grid)?;
+                let images = clear_images(inputs, &recs, &grid, &mut ClearImages::new())?;
                 body.radar = read_radars(inputs, &picked)?;
                 for (&i, (image, digest)) in picked.iter().zip(images) {
                     body.clear.insert(i, ClearEntry { digest, image });
@@ -936,9 +938,9 @@ impl FitState {
             });
         };
         let grid = grid_of(geometry, inputs, params);
-        // Borrowed, not cloned: a campaign's clear images are its largest
-        // summaries, and the reference is built while the state holds them.
-        let images: Vec<&CellImage> = self
+        // Borrowed, not loaded: the reference reads the images a block of
+        // rings at a time, from memory or the map's temporary file.
+        let images: Vec<&StoredImage> = self
             .body
             .clear
             .values()
@@ -951,7 +953,7 @@ impl FitState {
                 reason: format!("every one of the {n_clear} clear recordings holds no point"),
             });
         }
-        let reference = ClearReference::build(grid, &images, params);
+        let reference = ClearReference::build_from(grid, &StoredImages::new(&images), params)?;
         if reference.present().is_empty() {
             return Err(FitError::NoClearReference {
                 path: inputs.dir.clone(),

@@ -62,7 +62,12 @@ pub struct Args {
     /// all).
     #[arg(long, default_value_t = 256.0)]
     pub kept_memory_mb: f64,
-    /// Folder of that temporary file (default: the system's temporary
+    /// Megabytes of clear recordings' cell images held in memory while the
+    /// clear reference is built; the recordings beyond spill theirs to an
+    /// anonymous temporary file (same output; 0 spills all).
+    #[arg(long, default_value_t = 256.0)]
+    pub clear_memory_mb: f64,
+    /// Folder of the temporary files (default: the system's temporary
     /// folder; put it on a disk, not a RAM-backed /tmp).
     #[arg(long)]
     pub spill_dir: Option<PathBuf>,
@@ -83,6 +88,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     if let Some(dir) = &a.figures {
         super::check_folder_target("--figures", dir)?;
     }
+    super::clear_spill(a.clear_memory_mb, a.spill_dir.clone())?;
     let weather: WeatherClass = a
         .weather
         .parse()

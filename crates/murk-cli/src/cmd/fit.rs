@@ -139,10 +139,20 @@ pub struct Args {
     /// Radar pairing distance, metres.
     #[arg(long, default_value_t = 0.5)]
     pub radar_tolerance: f64,
+    /// Megabytes of clear recordings' cell images held in memory while the
+    /// clear reference is built; the recordings beyond spill theirs to an
+    /// anonymous temporary file (same output; 0 spills all).
+    #[arg(long, default_value_t = 256.0)]
+    pub clear_memory_mb: f64,
+    /// Folder of that temporary file (default: the system's temporary
+    /// folder; put it on a disk, not a RAM-backed /tmp).
+    #[arg(long)]
+    pub spill_dir: Option<PathBuf>,
 }
 
 /// Runs `murk fit`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    super::clear_spill(args.clear_memory_mb, args.spill_dir.clone())?;
     // Before minutes of fitting, not after.
     if let Some(out) = &args.out {
         super::check_file_target("--out", out)?;
