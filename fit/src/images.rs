@@ -371,3 +371,101 @@ impl ImageSource for StoredImages<'_> {
         self.images[i].read(from, n, out)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::FitParams;
+    use crate::observe::{CellGrid, ClearReference};
+    use crate::reference::tests::{noisy_images, same};
+    use murk_types::LidarSpec;
+
+    fn store(budget: u64, dir: PathBuf) -> ClearImages {
+        ClearImages {
+            budget,
+            dir,
+            held: 0,
+            file: None,
+            end: 0,
+        }
+    }
+
+    fn grid() -> CellGrid {
+        let mut spec = LidarSpec::vlp16();
+        spec.azimuth_resolution_deg = 1.0;
+        CellGrid::new(&spec)
+    }
+
+    #[test]
+    fn a_spilled_image_reads_back_and_serialises_as_it_was() {
+        let imgs = noisy_images(&grid(), 3, 7);
+        let mut s = store(0, std::env::temp_dir());
+        let cfg = bincode::config::standard();
+        for img in &imgs {
+            let stored = s.store(img.clone()).unwrap();
+            assert!(matches!(stored.0, Repr::Spilled { .. }));
+            assert_eq!(stored.load().unwrap().as_ref(), img);
+            assert_eq!(stored.frames(), img.frames);
+            let a = bincode::serde::encode_to_vec(&stored, cfg).unwrap();
+            let b = bincode::serde::encode_to_vec(img, cfg).unwrap();
+            assert_eq!(a, b);
+            let (back, _): (StoredImage, usize) =
+                bincode::serde::decode_from_slice(&a, cfg).unwrap();
+            assert_eq!(back, stored);
+        }
+        // An image whose cells are out of order is stored in order.
+        let mut rev = imgs[0].clone();
+        rev.cells.reverse();
+        rev.range.reverse();
+        rev.reflectivity.reverse();
+        rev.hits.reverse();
+        let stored = s.store(rev).unwrap();
+        assert_eq!(stored.load().unwrap().as_ref(), &imgs[0]);
+    }
+
+    #[test]
+    fn the_reference_is_the_same_from_memory_and_from_the_file() {
+        let g = grid();
+        let p = FitParams::default().check().unwrap();
+        for seed in 1..=3 {
+            let imgs = noisy_images(&g, 8, seed);
+            let expected = ClearReference::build(g.clone(), &imgs, &p);
+            let one = (imgs[0].cells.len() * ENTRY_BYTES) as u64;
+            // All in memory, none, and the first three (the budget of three
+            // and a half images).
+            for (budget, spilled) in [(u64::MAX, 0), (0, 8), (7 * one / 2, 5)] {
+                let mut s = store(budget, std::env::temp_dir());
+                let stored: Vec<StoredImage> =
+                    imgs.iter().map(|m| s.store(m.clone()).unwrap()).collect();
+                let n = stored
+                    .iter()
+                    .filter(|m| matches!(m.0, Repr::Spilled { .. }))
+                    .count();
+                assert!(
+                    n.abs_diff(spilled) <= 1,
+                    "{n} spilled, about {spilled} meant"
+                );
+                let refs: Vec<&StoredImage> = stored.iter().collect();
+                let r =
+                    ClearReference::build_from(g.clone(), &StoredImages::new(&refs), &p).unwrap();
+                assert!(same(&r, &expected), "seed {seed}, budget {budget}: differs");
+            }
+        }
+    }
+
+    #[test]
+    fn a_spill_folder_that_cannot_hold_the_file_is_named_in_the_error() {
+        let missing = std::env::temp_dir().join("murk-no-such-folder-for-spills");
+        let mut s = store(0, missing.clone());
+        let img = noisy_images(&grid(), 1, 1).remove(0);
+        let e = s.store(img).unwrap_err().to_string();
+        assert!(e.starts_with(&missing.display().to_string()), "{e}");
+        assert!(
+            e.contains("cannot create the temporary file of the clear images"),
+            "{e}"
+        );
+        // Within the budget nothing is written, and nothing fails.
+        let mut s = store(u64::MAX, missing);
+        assert!(s.store(noisy_images(&grid(), 1, 1).remove(0)).is_ok());
+    }
+}

@@ -388,6 +388,17 @@ impl ClearReference {
         src: &S,
         params: &FitValidParams,
     ) -> Result<ClearReference, S::Error> {
+        ClearReference::build_blocks(grid, src, params, BLOCK_ENTRIES)
+    }
+
+    /// [`ClearReference::build_from`] with blocks of about `block_entries`
+    /// entries (the reference does not depend on it).
+    fn build_blocks<S: ImageSource>(
+        grid: CellGrid,
+        src: &S,
+        params: &FitValidParams,
+        block_entries: usize,
+    ) -> Result<ClearReference, S::Error> {
         let n_cells = grid.cells();
         let n = src.count();
         let frames: Vec<u64> = (0..n).map(|i| src.frames(i).max(1) as u64).collect();
@@ -438,7 +449,7 @@ impl ClearReference {
             let c0 = rings[r0].offset;
             let mut r1 = r0 + 1;
             while r1 < rings.len()
-                && (rings[r1].offset + rings[r1].bins - c0).saturating_mul(n) <= BLOCK_ENTRIES
+                && (rings[r1].offset + rings[r1].bins - c0).saturating_mul(n) <= block_entries
             {
                 r1 += 1;
             }
@@ -1179,7 +1190,7 @@ fn median_without(v: &[f32], skip: usize) -> f32 {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::FitParams;
 
@@ -1378,7 +1389,8 @@ mod tests {
 
     #[test]
     fn a_reference_of_many_blocks_and_unsorted_images_is_the_per_cell_median() {
-        // 16 rings at 0.1°: 57,600 cells, fourteen blocks of the gathering.
+        // 16 rings at 0.1°: 57,600 cells, each image longer than a read
+        // ahead.
         let mut spec = LidarSpec::vlp16();
         spec.azimuth_resolution_deg = 0.1;
         let g = CellGrid::new(&spec);
@@ -1423,12 +1435,87 @@ mod tests {
             })
             .collect();
         let refs: Vec<&CellImage> = reversed.iter().collect();
-        assert_eq!(ClearReference::build(g, &refs, &p), r);
+        assert_eq!(ClearReference::build(g.clone(), &refs, &p), r);
+        // Built a ring at a time: the same reference.
+        let mem = MemoryImages(imgs.iter().collect());
+        let Ok(by_ring) = ClearReference::build_blocks(g, &mem, &p, 1);
+        assert_eq!(by_ring, r);
         // Each recording is scored on every reference cell and keeps at
         // least its own four fifths.
         for &(k, t) in r.leave_one_out() {
             assert_eq!(t as usize, checked);
             assert!(k as usize >= 4 * checked / 5 - 1 && k <= t, "{k} of {t}");
+        }
+    }
+
+    /// The two references are the same value, bit for bit (`NaN` marks
+    /// cells out of the reference, so `==` cannot say it).
+    pub(crate) fn same(a: &ClearReference, b: &ClearReference) -> bool {
+        format!("{a:?}") == format!("{b:?}")
+    }
+
+    /// Clear images of a scene with what makes the reference work: dropouts,
+    /// cells flickering between two surfaces (some stable, some not),
+    /// range noise, recordings of one to three scans. Seeded.
+    pub(crate) fn noisy_images(g: &CellGrid, n: usize, seed: u64) -> Vec<CellImage> {
+        use rand::{RngExt, SeedableRng, rngs::ChaCha8Rng};
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let scene: Vec<(f32, f32, f64)> = (0..g.cells())
+            .map(|_| {
+                let r = rng.random_range(2.0f32..80.0);
+                let far = if rng.random_bool(0.15) {
+                    r + rng.random_range(1.0f32..20.0)
+                } else {
+                    r
+                };
+                (r, far, rng.random_range(0.0..0.5))
+            })
+            .collect();
+        (0..n)
+            .map(|_| {
+                let frames = rng.random_range(1u32..=3);
+                let mut img = CellImage {
+                    frames,
+                    ..CellImage::default()
+                };
+                for (c, &(near, far, p_far)) in scene.iter().enumerate() {
+                    if rng.random_bool(0.12) {
+                        continue;
+                    }
+                    let surface = if rng.random_bool(p_far) { far } else { near };
+                    img.cells.push(c as u32);
+                    img.range.push(surface + rng.random_range(-0.03f32..0.03));
+                    img.reflectivity.push(rng.random_range(0.0f32..100.0));
+                    img.hits.push(rng.random_range(1..=frames));
+                }
+                img
+            })
+            .collect()
+    }
+
+    #[test]
+    fn blocks_of_one_ring_or_of_all_give_the_same_reference() {
+        // 16 rings of 360 cells; images longer than a read-ahead, blocks
+        // of one ring against one block of all. Three seeds.
+        let mut spec = LidarSpec::vlp16();
+        spec.azimuth_resolution_deg = 1.0;
+        let g = CellGrid::new(&spec);
+        let p = FitParams::default().check().unwrap();
+        for seed in 1..=3 {
+            let imgs = noisy_images(&g, 6 + seed as usize, seed);
+            assert!(imgs.iter().all(|m| m.cells.len() > READ_CHUNK));
+            let mem = MemoryImages(imgs.iter().collect());
+            let Ok(one) = ClearReference::build_blocks(g.clone(), &mem, &p, usize::MAX);
+            let Ok(rings) = ClearReference::build_blocks(g.clone(), &mem, &p, 1);
+            let Ok(three) = ClearReference::build_blocks(g.clone(), &mem, &p, 3 * 360 * imgs.len());
+            assert!(same(&rings, &one), "seed {seed}: a ring per block differs");
+            assert!(
+                same(&three, &one),
+                "seed {seed}: three rings per block differ"
+            );
+            // The scene is not trivial: some cells out, some scored.
+            assert!(one.present().len() > g.cells() / 2 && one.present().len() < g.cells());
+            assert!(one.leave_one_out().iter().all(|&(k, t)| k > 0 && k < t));
         }
     }
 

@@ -413,3 +413,43 @@ fn a_clear_part_serves_fits_of_any_degraded_subset_byte_for_byte() {
         }
     }
 }
+
+/// Fits and clear states with every clear image spilled to the temporary
+/// file ([`murk_fit::set_clear_image_memory`] 0) against every image in
+/// memory: the same table and state bytes, and sharded maps of spilled
+/// images merge to the same table. (The setting is the process's; another
+/// test running meanwhile only changes where its images sit, not its
+/// result.)
+#[test]
+fn spilled_clear_images_give_the_same_table_and_state_bytes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let generated = generated(tmp.path(), 12, 40);
+    let p = params();
+    for dir in [default_campaign(), generated] {
+        let inputs = FitInputs::from_campaign(&Campaign::open(&dir).unwrap());
+        let run = |bytes: u64| {
+            murk_fit::set_clear_image_memory(bytes);
+            let table = p.fit_inputs(&inputs).unwrap().to_json().unwrap();
+            let state = p
+                .fit_partial(&inputs, &Selection::All, None)
+                .unwrap()
+                .to_bytes()
+                .unwrap();
+            (table, state)
+        };
+        let memory = run(u64::MAX);
+        let spilled = run(0);
+        assert!(memory.0 == spilled.0, "{}: tables differ", dir.display());
+        assert!(memory.1 == spilled.1, "{}: states differ", dir.display());
+        murk_fit::set_clear_image_memory(0);
+        let mut rng = StdRng::seed_from_u64(5);
+        let (c, d) = (ids_of(&inputs, true).len(), ids_of(&inputs, false).len());
+        let sharded = sharded_table(&inputs, &p, c.min(3), d.min(3), &mut rng);
+        assert!(
+            sharded == memory.0,
+            "{}: spilled shards differ",
+            dir.display()
+        );
+    }
+    murk_fit::set_clear_image_memory(murk_fit::DEFAULT_CLEAR_IMAGE_MEMORY);
+}

@@ -327,3 +327,38 @@ fn reflectivity_law_is_compared_and_refused_without_the_law_comparison() {
     assert!(!o.status.success());
     assert!(stderr(&o).contains("--no-law-comparison"), "{}", stderr(&o));
 }
+
+/// `--clear-memory-mb 0` spills every clear image and gives the same table
+/// bytes; a negative budget and a spill folder that does not exist are
+/// refused naming the flag or the folder.
+#[test]
+fn spilled_clear_images_give_the_same_table_and_bad_budgets_are_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let campaign = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/default-campaign");
+    let fit = |out: &Path, extra: &[&str]| {
+        let mut args = vec!["fit", s(&campaign), "--out", s(out), "--bootstrap", "0"];
+        args.extend_from_slice(extra);
+        murk(&args)
+    };
+    let (a, b) = (dir.path().join("a.json"), dir.path().join("b.json"));
+    let o = fit(&a, &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let spill = dir.path().join("spill");
+    std::fs::create_dir(&spill).unwrap();
+    let o = fit(&b, &["--clear-memory-mb", "0", "--spill-dir", s(&spill)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(std::fs::read(&a).unwrap() == std::fs::read(&b).unwrap());
+    // The file is anonymous: nothing is left in the folder.
+    assert_eq!(std::fs::read_dir(&spill).unwrap().count(), 0);
+    let o = fit(&b, &["--clear-memory-mb=-1"]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--clear-memory-mb"), "{}", stderr(&o));
+    let missing = dir.path().join("no-such-folder");
+    let o = fit(&b, &["--clear-memory-mb", "0", "--spill-dir", s(&missing)]);
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert!(
+        e.contains(s(&missing)) && e.contains("temporary file of the clear images"),
+        "{e}"
+    );
+}

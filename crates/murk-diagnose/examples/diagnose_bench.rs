@@ -14,7 +14,7 @@
 //! byte. Delete `DIR` afterwards: 1,000 recordings are about 2 GB.
 //!
 //! `cargo build --workspace --release --examples`, then
-//! `target/release/examples/diagnose_bench DIR N [--vlp16] [--azimuth DEG] [--hide] [--keep] [--kept-memory-mb MB]`
+//! `target/release/examples/diagnose_bench DIR N [--vlp16] [--azimuth DEG] [--hide] [--keep] [--kept-memory-mb MB] [--clear-memory-mb MB]`
 //! (`--vlp16`: the small preset's VLP-16 instead; `--azimuth 0.09`: the
 //! HDL-64 fired every 0.09° instead of 0.2°, about 100 k points per scan
 //! as at 5 Hz, the campaign named `hdl64-0.09-N`; `--hide`: the campaign
@@ -23,7 +23,9 @@
 //! the name ending in `-hide`; `--keep` keeps the campaign, which is
 //! otherwise removed after the run; `--kept-memory-mb`: the diagnosis's
 //! memory budget for kept returns, 256 by default, beyond which they spill
-//! to a temporary file — `inf` holds them all). The mean points
+//! to a temporary file — `inf` holds them all; `--clear-memory-mb`: the
+//! same for the clear recordings' cell images while the reference is
+//! built, 256 by default). The mean points
 //! per scan of the first recording is printed with the figures.
 
 use std::path::PathBuf;
@@ -47,7 +49,7 @@ fn status_mb(field: &str) -> Option<f64> {
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let usage = "usage: diagnose_bench DIR N [--vlp16] [--azimuth DEG] [--hide] [--keep] [--kept-memory-mb MB]";
+    let usage = "usage: diagnose_bench DIR N [--vlp16] [--azimuth DEG] [--hide] [--keep] [--kept-memory-mb MB] [--clear-memory-mb MB]";
     let dir: PathBuf = args.first().map(PathBuf::from).ok_or(usage)?;
     let n: usize = args.get(1).ok_or(usage)?.parse()?;
     let vlp16 = args.iter().any(|a| a == "--vlp16");
@@ -57,6 +59,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Some(i) => args.get(i + 1).ok_or(usage)?.parse()?,
         None => 256.0,
     };
+    if let Some(i) = args.iter().position(|a| a == "--clear-memory-mb") {
+        let mb: f64 = args.get(i + 1).ok_or(usage)?.parse()?;
+        murk_fit::set_clear_image_memory((mb * 1_048_576.0) as u64);
+    }
     let azimuth: Option<f64> = match args.iter().position(|a| a == "--azimuth") {
         Some(i) => Some(args.get(i + 1).ok_or(usage)?.parse()?),
         None => None,
