@@ -283,8 +283,8 @@ impl CellImage {
             f[*k as usize] = p.reflectivity;
             *k += 1;
         }
-        // Sized to the occupied cells: images are held for every clear
-        // recording while the reference is built.
+        // Sized to the occupied cells: images are held (in memory up to the
+        // fit's budget, `crate::images`) until the reference is built.
         let occupied = start.windows(2).filter(|w| w[0] != w[1]).count();
         let mut img = CellImage {
             cells: Vec::with_capacity(occupied),
