@@ -90,56 +90,12 @@ impl SpillFile {
         }
     }
 
-    #[cfg(unix)]
     fn write_at(&self, buf: &[u8], offset: u64) -> std::io::Result<()> {
-        std::os::unix::fs::FileExt::write_all_at(&self.file, buf, offset)
+        murk_io::write_all_at(&self.file, buf, offset)
     }
 
-    #[cfg(windows)]
-    fn write_at(&self, mut buf: &[u8], mut offset: u64) -> std::io::Result<()> {
-        while !buf.is_empty() {
-            match std::os::windows::fs::FileExt::seek_write(&self.file, buf, offset)? {
-                0 => return Err(std::io::ErrorKind::WriteZero.into()),
-                n => {
-                    buf = &buf[n..];
-                    offset += n as u64;
-                }
-            }
-        }
-        Ok(())
-    }
-
-    #[cfg(not(any(unix, windows)))]
-    fn write_at(&self, _buf: &[u8], _offset: u64) -> std::io::Result<()> {
-        Err(std::io::Error::other(
-            "positioned writes are not supported here",
-        ))
-    }
-
-    #[cfg(unix)]
     fn read_at(&self, buf: &mut [u8], offset: u64) -> std::io::Result<()> {
-        std::os::unix::fs::FileExt::read_exact_at(&self.file, buf, offset)
-    }
-
-    #[cfg(windows)]
-    fn read_at(&self, mut buf: &mut [u8], mut offset: u64) -> std::io::Result<()> {
-        while !buf.is_empty() {
-            match std::os::windows::fs::FileExt::seek_read(&self.file, buf, offset)? {
-                0 => return Err(std::io::ErrorKind::UnexpectedEof.into()),
-                n => {
-                    buf = &mut buf[n..];
-                    offset += n as u64;
-                }
-            }
-        }
-        Ok(())
-    }
-
-    #[cfg(not(any(unix, windows)))]
-    fn read_at(&self, _buf: &mut [u8], _offset: u64) -> std::io::Result<()> {
-        Err(std::io::Error::other(
-            "positioned reads are not supported here",
-        ))
+        murk_io::read_exact_at(&self.file, buf, offset)
     }
 }
 
@@ -255,12 +211,7 @@ impl StoredImage {
     fn read(&self, from: usize, n: usize, out: &mut Vec<ImageEntry>) -> Result<(), FitError> {
         match &self.0 {
             Repr::Memory(img) => {
-                out.extend((from..from + n).map(|q| ImageEntry {
-                    cell: img.cells[q],
-                    range: img.range[q],
-                    reflectivity: img.reflectivity[q],
-                    hits: img.hits[q],
-                }));
+                img.entries(from, n, out);
                 Ok(())
             }
             Repr::Spilled { file, offset, .. } => {

@@ -257,6 +257,16 @@ fn median_f32(v: &mut [f32]) -> f32 {
 }
 
 impl CellImage {
+    /// Appends entries `from .. from + n` to `out`.
+    pub(crate) fn entries(&self, from: usize, n: usize, out: &mut Vec<ImageEntry>) {
+        out.extend((from..from + n).map(|q| ImageEntry {
+            cell: self.cells[q],
+            range: self.range[q],
+            reflectivity: self.reflectivity[q],
+            hits: self.hits[q],
+        }));
+    }
+
     /// Reduces the points of one single-scan recording (any order) to a cell
     /// image.
     pub fn from_points(points: &[CellPoint], n_cells: usize) -> CellImage {
@@ -767,13 +777,7 @@ impl ImageSource for MemoryImages<'_> {
         n: usize,
         out: &mut Vec<ImageEntry>,
     ) -> Result<(), Self::Error> {
-        let img = self.0[i];
-        out.extend((from..from + n).map(|q| ImageEntry {
-            cell: img.cells[q],
-            range: img.range[q],
-            reflectivity: img.reflectivity[q],
-            hits: img.hits[q],
-        }));
+        self.0[i].entries(from, n, out);
         Ok(())
     }
 }

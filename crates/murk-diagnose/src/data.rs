@@ -309,30 +309,8 @@ impl SpillFile {
         self.error.lock().unwrap_or_else(|p| p.into_inner()).clone()
     }
 
-    #[cfg(unix)]
     fn read_at(&self, buf: &mut [u8], offset: u64) -> std::io::Result<()> {
-        std::os::unix::fs::FileExt::read_exact_at(&self.file, buf, offset)
-    }
-
-    #[cfg(windows)]
-    fn read_at(&self, mut buf: &mut [u8], mut offset: u64) -> std::io::Result<()> {
-        while !buf.is_empty() {
-            match std::os::windows::fs::FileExt::seek_read(&self.file, buf, offset)? {
-                0 => return Err(std::io::ErrorKind::UnexpectedEof.into()),
-                n => {
-                    buf = &mut buf[n..];
-                    offset += n as u64;
-                }
-            }
-        }
-        Ok(())
-    }
-
-    #[cfg(not(any(unix, windows)))]
-    fn read_at(&self, _buf: &mut [u8], _offset: u64) -> std::io::Result<()> {
-        Err(std::io::Error::other(
-            "positioned reads are not supported here",
-        ))
+        murk_io::read_exact_at(&self.file, buf, offset)
     }
 }
 

@@ -102,6 +102,7 @@ mod error;
 mod options;
 mod pcap;
 mod pcd;
+mod positioned;
 mod ring;
 #[cfg(feature = "parquet")]
 mod table;
@@ -116,6 +117,7 @@ pub use error::IoError;
 pub use murk_types::BinLayout;
 pub use options::{PcdData, ReadOptions, WriteOptions};
 pub use pcd::parse_pcd;
+pub use positioned::{read_exact_at, write_all_at};
 #[cfg(feature = "parquet")]
 pub use table::parse_parquet;
 pub use text::{CsvNeeds, CsvRows, RowEdit, RowPiece, parse_csv, parse_csv_rows};
