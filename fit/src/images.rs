@@ -49,6 +49,21 @@ pub fn set_clear_image_memory(bytes: u64) {
     MEMORY.store(bytes, Ordering::Relaxed);
 }
 
+/// [`set_clear_image_memory`] in megabytes (MiB, as `--clear-memory-mb`),
+/// refused unless a number ≥ 0 (infinity keeps every image in memory).
+pub fn set_clear_image_memory_mb(mb: f64) -> Result<(), FitError> {
+    if mb.is_nan() || mb < 0.0 {
+        return Err(FitError::InvalidParam {
+            name: "clear_memory_mb",
+            value: mb.to_string(),
+            reason: "megabytes of clear images held in memory must be a number ≥ 0".into(),
+        });
+    }
+    // `as` saturates: infinity (and anything past u64) holds every image.
+    set_clear_image_memory((mb * 1_048_576.0).round() as u64);
+    Ok(())
+}
+
 /// How many bytes of clear images a fit keeps in memory
 /// ([`set_clear_image_memory`]).
 pub fn clear_image_memory() -> u64 {

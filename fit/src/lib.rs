@@ -168,7 +168,7 @@ pub use hyperparams::{
 };
 pub use images::{
     DEFAULT_CLEAR_IMAGE_MEMORY, clear_image_dir, clear_image_memory, set_clear_image_dir,
-    set_clear_image_memory,
+    set_clear_image_memory, set_clear_image_memory_mb,
 };
 pub use state::{ClearPart, FitState, STATE_FORMAT, Selection};
 /// The one-dimensional bounded minimiser (Brent's method) that profiles the

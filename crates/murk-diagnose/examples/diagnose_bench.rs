@@ -61,7 +61,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     if let Some(i) = args.iter().position(|a| a == "--clear-memory-mb") {
         let mb: f64 = args.get(i + 1).ok_or(usage)?.parse()?;
-        murk_fit::set_clear_image_memory((mb * 1_048_576.0) as u64);
+        murk_fit::set_clear_image_memory_mb(mb)?;
     }
     let azimuth: Option<f64> = match args.iter().position(|a| a == "--azimuth") {
         Some(i) => Some(args.get(i + 1).ok_or(usage)?.parse()?),

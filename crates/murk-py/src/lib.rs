@@ -1002,6 +1002,19 @@ fn set_num_threads(n: usize) {
     pool::set_num_threads(n);
 }
 
+/// How many megabytes of clear recordings' cell images a fit or diagnosis
+/// holds in memory while its clear reference is built, the rest spilled to
+/// an anonymous temporary file in `spill_dir` (`murk fit
+/// --clear-memory-mb`, `--spill-dir`; the process's setting, for the
+/// calls that follow; it changes memory only, never a result).
+#[pyfunction]
+#[pyo3(signature = (mb, spill_dir=None))]
+fn set_clear_memory(mb: f64, spill_dir: Option<PathBuf>) -> PyResult<()> {
+    murk_fit::set_clear_image_memory_mb(mb).map_err(|e| errors::fit(&e))?;
+    murk_fit::set_clear_image_dir(spill_dir);
+    Ok(())
+}
+
 /// The default number of worker threads of a call.
 #[pyfunction]
 fn get_num_threads() -> usize {
@@ -1024,6 +1037,7 @@ fn _murk(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<FitState>()?;
     m.add_function(wrap_pyfunction!(diagnose, m)?)?;
     m.add_function(wrap_pyfunction!(set_num_threads, m)?)?;
+    m.add_function(wrap_pyfunction!(set_clear_memory, m)?)?;
     m.add_function(wrap_pyfunction!(_rust_apply_seconds, m)?)?;
     m.add_function(wrap_pyfunction!(get_num_threads, m)?)?;
     Ok(())

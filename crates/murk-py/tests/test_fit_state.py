@@ -68,3 +68,24 @@ def test_cli_merge_of_python_states(tmp_path, cli, fitted):
                     str(tmp_path / "d1.state"), "--out", str(tmp_path / "t.json")],
                    check=True, capture_output=True)
     assert (tmp_path / "t.json").read_text() == fitted.read_text()
+
+
+def test_spilled_clear_images_give_the_cli_table(tmp_path, cli, fitted):
+    """``set_clear_memory(0)`` spills every clear image to a file in
+    ``spill_dir``: the same table bytes, nothing left in the folder; a
+    negative budget raises the CLI's message."""
+    try:
+        murk.set_clear_memory(0, spill_dir=tmp_path)
+        t = murk.fit(CAMPAIGN, bootstrap=20)
+        assert t.to_json() == fitted.read_text()
+        assert list(tmp_path.iterdir()) == []
+        with pytest.raises(murk.InputError, match="clear_memory_mb") as e:
+            murk.set_clear_memory(-1)
+        r = subprocess.run([str(cli), "fit", str(CAMPAIGN), "--out", str(tmp_path / "t.json"),
+                            "--clear-memory-mb=-1"], capture_output=True, text=True)
+        assert r.returncode != 0 and str(e.value) in r.stderr, r.stderr
+        with pytest.raises(murk.FitError, match="no-such-folder"):
+            murk.set_clear_memory(0, spill_dir=tmp_path / "no-such-folder")
+            murk.fit(CAMPAIGN, bootstrap=20)
+    finally:
+        murk.set_clear_memory(256)

@@ -90,10 +90,7 @@ pub fn clean_stale(dirs: impl IntoIterator<Item = std::path::PathBuf>) {
 /// Sets how much of the clear images a fit holds in memory and where the
 /// rest spills (`--clear-memory-mb`, `--spill-dir`).
 pub fn clear_spill(mb: f64, dir: Option<std::path::PathBuf>) -> anyhow::Result<()> {
-    if !(mb.is_finite() && mb >= 0.0) {
-        anyhow::bail!("--clear-memory-mb must be a number of megabytes ≥ 0, not {mb}");
-    }
-    murk_fit::set_clear_image_memory((mb * 1_048_576.0).round() as u64);
+    anyhow::Context::context(murk_fit::set_clear_image_memory_mb(mb), "--clear-memory-mb")?;
     murk_fit::set_clear_image_dir(dir);
     Ok(())
 }

@@ -54,6 +54,7 @@ from ._murk import (  # noqa: F401
     plan,
     read,
     set_num_threads,
+    set_clear_memory,
     write,
 )
 
@@ -79,6 +80,7 @@ __all__ = [
     "get_num_threads",
     "read",
     "set_num_threads",
+    "set_clear_memory",
     "write",
 ]
 

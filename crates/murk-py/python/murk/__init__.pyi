@@ -284,6 +284,9 @@ def diagnose(
 def set_num_threads(n: int) -> None:
     """Default worker threads of every call (0: back to ``MURK_NUM_THREADS``, else the CPU count)."""
 
+def set_clear_memory(mb: float, spill_dir: Optional[PathLike] = None) -> None:
+    """Megabytes of clear cell images a fit or diagnosis holds in memory, the rest in a temporary file in ``spill_dir`` (``--clear-memory-mb``, ``--spill-dir``); memory only, never a result."""
+
 def get_num_threads() -> int:
     """The default worker threads of a call."""
 
