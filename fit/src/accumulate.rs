@@ -25,6 +25,49 @@ pub const REFLECTIVITY_STEP: f64 = 0.05;
 pub const REFLECTIVITY_SPAN: f64 = 1024.0;
 /// Resolution of the occluder histograms, metres.
 pub const OCCLUDER_STEP_M: f64 = 0.01;
+/// Unit of the masked lengths ([`RecordingRow::masked`],
+/// [`NoiseAcc::masked`]), metres: integer sums, so that merging in any
+/// order gives the same bytes.
+pub const MASK_UNIT_M: f64 = 1e-4;
+
+/// Adds to `out[k]` the length of each stretch `[a, b)` that falls in step
+/// `k` (of `step` metres), in [`MASK_UNIT_M`], times `weight`; what lies
+/// beyond the last step is dropped.
+fn add_stretches(out: &mut [u64], step: f64, stretches: &[(f32, f32)], weight: u64) {
+    let n = out.len();
+    if n == 0 || weight == 0 {
+        return;
+    }
+    let units = |len: f64| (len / MASK_UNIT_M).round().max(0.0) as u64 * weight;
+    // Whole steps through a difference array, the partial ends directly.
+    let mut whole = vec![0i64; n + 1];
+    for &(a, b) in stretches {
+        let (a, b) = (a.max(0.0) as f64, (b as f64).min(n as f64 * step));
+        if b <= a {
+            continue;
+        }
+        let ka = ((a / step).floor() as usize).min(n - 1);
+        let kb = ((b / step).floor() as usize).min(n);
+        if ka == kb {
+            out[ka] += units(b - a);
+            continue;
+        }
+        out[ka] += units((ka + 1) as f64 * step - a);
+        if ka + 1 < kb {
+            whole[ka + 1] += 1;
+            whole[kb] -= 1;
+        }
+        if kb < n {
+            out[kb] += units(b - kb as f64 * step);
+        }
+    }
+    let full = units(step);
+    let mut c = 0i64;
+    for (o, w) in out.iter_mut().zip(&whole) {
+        c += w;
+        *o += c.max(0) as u64 * full;
+    }
+}
 
 /// The scalars of one recording.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -55,6 +98,13 @@ pub struct RecordingRow {
     /// step of `ROW_OCCLUDER_STEP_M` (0.1 m): what could hide its own ghost and
     /// ring returns (their visibility varies with the weather's density).
     pub occluders: Vec<u32>,
+    /// Length of this recording's rays masked by the near scene, per step
+    /// of `ROW_OCCLUDER_STEP_M` (in `MASK_UNIT_M`, 0.1 mm): the stretches in front
+    /// of each ray's first return where a weather return would pair or fall
+    /// in a clear envelope ([`RecordingTally::masked`]), each counted once
+    /// per scan and revolution of the ray. Divided by the step, the rays
+    /// masked there, on average over the step.
+    pub masked: Vec<u64>,
     /// Rays of the recording (cells × revolutions of the reference).
     pub rays: u64,
     /// Scans of the recording (revolutions of a `.pcap`, 1 for other files).
@@ -93,14 +143,20 @@ pub struct RecordingRow {
 pub const ROW_OCCLUDER_STEP_M: f64 = 0.1;
 
 impl RecordingRow {
-    /// Share of this recording's rays open (no return nearer) at the start of
-    /// each step of `ROW_OCCLUDER_STEP_M` (0.1 m).
+    /// Share of this recording's rays on which a weather return would be
+    /// seen and counted as one, per step of `ROW_OCCLUDER_STEP_M` (0.1 m):
+    /// open (no return nearer than the step's start) and not masked by the
+    /// near scene (on average over the step).
     pub fn open_rays(&self) -> Vec<f64> {
+        let rays = self.rays.max(1) as f64;
+        let per_ray = ROW_OCCLUDER_STEP_M / MASK_UNIT_M;
         let mut acc = 0u64;
         self.occluders
             .iter()
-            .map(|&c| {
-                let v = 1.0 - acc as f64 / self.rays.max(1) as f64;
+            .enumerate()
+            .map(|(k, &c)| {
+                let masked = self.masked.get(k).copied().unwrap_or(0) as f64 / per_ray;
+                let v = 1.0 - (acc as f64 + masked) / rays;
                 acc += c as u64;
                 v.max(0.0)
             })
@@ -145,8 +201,11 @@ pub(crate) fn merge_cells(mut v: Vec<(u32, u32, u32, f64)>) -> (Vec<(u32, u32, u
 /// them that way). `occluders[k]` counts the returns (scene and noise) with range in
 /// step `k` (of [`OCCLUDER_STEP_M`]), each recording weighted by its number
 /// of ghost (or ring) returns; `exposure` is Σ weight × rays. The share of
-/// rays open at distance `d` is then `1 − Σ_{k ≤ d} occluders / exposure`,
-/// the visibility by which the distance law is seen.
+/// rays open at distance `d` is then `1 − Σ_{k ≤ d} occluders / exposure`.
+/// Of those, the ones whose stretch at `d` is masked by the near scene
+/// (`masked`: a return there would be paired or called scene) do not show
+/// a weather return as one either; what is left is the visibility by which
+/// the distance law and the counts are seen.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct NoiseAcc {
     /// Range histogram over the class window.
@@ -155,6 +214,9 @@ pub struct NoiseAcc {
     pub reflectivity: Histogram,
     /// Weighted occluder counts from 0 m to the window's far end.
     pub occluders: Vec<u64>,
+    /// Weighted masked lengths per occluder step, in `MASK_UNIT_M`
+    /// ([`RecordingRow::masked`]).
+    pub masked: Vec<u64>,
     /// Σ weight × rays per recording.
     pub exposure: u64,
 }
@@ -168,11 +230,13 @@ impl NoiseAcc {
             distance: Histogram::new(window[0], window[1], db),
             reflectivity: Histogram::new(floor, floor + REFLECTIVITY_SPAN, rb),
             occluders: vec![0; ob],
+            masked: vec![0; ob],
             exposure: 0,
         }
     }
 
-    fn add(&mut self, points: &[(f32, f32)], occluders: &[f32], rays: u64) {
+    fn add(&mut self, points: &[(f32, f32)], tally: &RecordingTally, rays: u64, per_cell: u64) {
+        let occluders = &tally.occluders;
         for &(r, f) in points {
             self.distance.add(r as f64);
             self.reflectivity.add(f as f64);
@@ -189,6 +253,12 @@ impl NoiseAcc {
                 self.occluders[k] += w;
             }
         }
+        add_stretches(
+            &mut self.masked,
+            OCCLUDER_STEP_M,
+            &tally.masked,
+            w * per_cell,
+        );
     }
 
     fn merge(&mut self, o: &NoiseAcc) {
@@ -197,21 +267,30 @@ impl NoiseAcc {
         for (a, b) in self.occluders.iter_mut().zip(&o.occluders) {
             *a += b;
         }
+        for (a, b) in self.masked.iter_mut().zip(&o.masked) {
+            *a += b;
+        }
         self.exposure += o.exposure;
     }
 
-    /// Share of rays open (no closer return) at the start of each
-    /// occluder step; `None` without exposure.
+    /// Share of rays on which a weather return would be seen and counted,
+    /// per occluder step: open (no closer return at the step's start) and
+    /// not masked by the near scene (on average over the step); `None`
+    /// without exposure.
     pub fn visibility(&self) -> Option<Vec<f64>> {
         if self.exposure == 0 {
             return None;
         }
+        let exposure = self.exposure as f64;
+        let per_ray = OCCLUDER_STEP_M / MASK_UNIT_M;
         let mut acc = 0u64;
         Some(
             self.occluders
                 .iter()
-                .map(|&c| {
-                    let v = 1.0 - acc as f64 / self.exposure as f64;
+                .enumerate()
+                .map(|(k, &c)| {
+                    let masked = self.masked.get(k).copied().unwrap_or(0) as f64 / per_ray;
+                    let v = 1.0 - (acc as f64 + masked) / exposure;
                     acc += c;
                     v.max(0.0)
                 })
@@ -349,10 +428,15 @@ impl WeatherAcc {
             kept += k as u64;
             total += h as u64;
         }
-        self.ghost.add(&tally.ghosts, &tally.occluders, rays);
-        self.ring.add(&tally.rings, &tally.occluders, rays);
+        // Each cell's masked stretches stand for its rays: one per scan and
+        // revolution.
+        let per_cell = frames as u64 * cells.revolutions.max(1);
+        self.ghost.add(&tally.ghosts, tally, rays, per_cell);
+        self.ring.add(&tally.rings, tally, rays, per_cell);
         let reach = params.noise_reach_m();
         let mut occluders = vec![0u32; (reach / ROW_OCCLUDER_STEP_M).ceil().max(1.0) as usize];
+        let mut masked = vec![0u64; occluders.len()];
+        add_stretches(&mut masked, ROW_OCCLUDER_STEP_M, &tally.masked, per_cell);
         for &r in &tally.occluders {
             let k = (r as f64 / ROW_OCCLUDER_STEP_M).floor().max(0.0) as usize;
             if let Some(o) = occluders.get_mut(k) {
@@ -380,6 +464,7 @@ impl WeatherAcc {
             far: tally.far,
             points: tally.points,
             occluders,
+            masked,
             rays,
             frames,
             revolutions: frames as u64 * cells.revolutions.max(1),
@@ -416,5 +501,63 @@ impl WeatherAcc {
     /// float summary).
     pub fn finish(&mut self) {
         self.rows.sort_by_key(|r| r.index);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Stretches split over steps: partial ends directly, whole steps
+    /// between, what lies beyond the last step dropped, times the weight.
+    #[test]
+    fn stretches_are_added_per_step() {
+        let mut out = vec![0u64; 4];
+        add_stretches(&mut out, 0.1, &[(0.05, 0.25), (0.31, 0.33), (0.35, 0.9)], 2);
+        // 0.05 m, 0.1 m, 0.05 m of the first; 0.02 m and 0.05 m in step 3.
+        assert_eq!(out, vec![1000, 2000, 1000, 1400]);
+        let mut one = vec![0u64; 3];
+        add_stretches(&mut one, 0.1, &[(0.0, 0.3)], 1);
+        assert_eq!(one, vec![1000; 3]);
+        add_stretches(&mut one, 0.1, &[(0.2, 0.1), (0.5, 0.7)], 1);
+        assert_eq!(one, vec![1000; 3], "empty and out-of-range stretches");
+    }
+
+    /// A recording whose rays are all masked over a stretch sees nothing
+    /// there: the row's visibility is 1 before it, 0 inside, and 1 − the
+    /// occluded share after an occluder.
+    #[test]
+    fn masked_rays_are_not_open() {
+        let mut masked = vec![0u64; 5];
+        // 10 rays, each masked over [0.1, 0.3).
+        add_stretches(&mut masked, ROW_OCCLUDER_STEP_M, &[(0.1, 0.3); 10], 1);
+        let row = RecordingRow {
+            index: 0,
+            id: "r".into(),
+            mor: 50.0,
+            rain_rate: None,
+            kept: 0,
+            total: 0,
+            ghosts: 0,
+            rings: 0,
+            scene: 0,
+            far: 0,
+            points: 0,
+            occluders: vec![0, 0, 0, 2, 0],
+            masked,
+            rays: 10,
+            frames: 1,
+            revolutions: 1,
+            survival: Vec::new(),
+            survival_clear: Vec::new(),
+            ln_mor_scaled: 0.0,
+            hidden: Vec::new(),
+            beyond_windows: Vec::new(),
+        };
+        let v = row.open_rays();
+        let want = [1.0, 0.0, 0.0, 1.0, 0.8];
+        for (a, b) in v.iter().zip(want) {
+            assert!((a - b).abs() < 1e-9, "{v:?}");
+        }
     }
 }

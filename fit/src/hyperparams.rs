@@ -488,6 +488,19 @@ impl FitValidParams {
     pub fn pairing_tolerance(&self, r: f64) -> f64 {
         self.pairing_tolerance_m.max(self.pairing_tolerance_rel * r)
     }
+    /// The ranges `d` that lie within the pairing tolerance (taken at `d`,
+    /// as pairing does) of `[lo, hi]`: `d + tol(d) ≥ lo` and
+    /// `d − tol(d) ≤ hi`.
+    pub(crate) fn tolerance_span(&self, lo: f64, hi: f64) -> [f64; 2] {
+        let (a, rel) = (self.pairing_tolerance_m, self.pairing_tolerance_rel);
+        let low = (lo - a).min(lo / (1.0 + rel));
+        let high = if rel < 1.0 {
+            (hi + a).max(hi / (1.0 - rel))
+        } else {
+            f64::INFINITY
+        };
+        [low, high]
+    }
     /// Pair on the declared grid rather than the measured one.
     pub fn declared_geometry(&self) -> bool {
         self.declared_geometry

@@ -648,6 +648,26 @@ impl ClearReference {
         lo.is_finite() && range >= lo - tol && range <= hi + tol
     }
 
+    /// The ranges at which a degraded return offered to `cell` (as its own
+    /// cell or as an azimuth neighbour) is not counted as weather: the
+    /// cell's clear envelope widened by the pairing tolerance (a return
+    /// there is *scene*) joined with the reference range within the cell's
+    /// own tolerance (a return there may pair). `None` for a cell in which
+    /// no clear recording returned.
+    pub fn scene_span(&self, cell: usize, params: &FitValidParams) -> Option<[f32; 2]> {
+        let (lo, hi) = (self.env_lo[cell], self.env_hi[cell]);
+        if !lo.is_finite() {
+            return None;
+        }
+        let [mut a, mut b] = params.tolerance_span(lo as f64, hi as f64);
+        if self.hits[cell] > 0 {
+            let (r0, t) = (self.range[cell] as f64, self.tolerance(cell, params) as f64);
+            a = a.min(r0 - t);
+            b = b.max(r0 + t);
+        }
+        Some([a as f32, b as f32])
+    }
+
     /// Number of clear recordings behind the reference.
     pub fn clear_recordings(&self) -> usize {
         self.clear_recordings

@@ -90,8 +90,9 @@ use crate::{FitError, FitParams, FitValidParams, FittedTable, TOOL};
 /// Format 2: the parameters gained `compare_laws`; format 3:
 /// `reference_min_agreement` and the recordings' MOR readings; format 4:
 /// `reflectivity_law_edges`; format 5: each recording's hidden returns and
-/// the cells beyond the noise windows (the occlusion test).
-pub const STATE_FORMAT: u32 = 5;
+/// the cells beyond the noise windows (the occlusion test); format 6: the
+/// stretches of each recording's rays masked by the near scene.
+pub const STATE_FORMAT: u32 = 6;
 
 const MAGIC: &[u8; 8] = b"MURKFITS";
 

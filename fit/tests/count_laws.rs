@@ -228,3 +228,97 @@ fn real_frames_at_a_narrow_mor_range_give_a_table() {
         }
     }
 }
+
+/// The expected ghost and ring counts of the fitted table against the
+/// ground-truth model at `mors` (within 15 %), and the distance laws'
+/// means (within three of their standard errors, which are over
+/// recordings).
+fn near_range_against_truth(
+    t: &murk_types::CoefficientTable,
+    truth: &murk_fixtures::WeatherModel,
+    mors: &[f64],
+    what: &str,
+) -> Vec<String> {
+    let fog = &t.weathers[&WeatherClass::Fog];
+    let mut errors = Vec::new();
+    for (name, law, truth) in [
+        ("ghost", &fog.ghost, &truth.ghost),
+        ("ring", &fog.ring, &truth.ring),
+    ] {
+        let law = law
+            .as_ref()
+            .unwrap_or_else(|| panic!("{what}: no {name} law"));
+        let count = law.count_law.as_ref().expect("a count law");
+        let ratios: Vec<f64> = mors
+            .iter()
+            .map(|&m| count.expected(m) / truth.count.expected(m))
+            .collect();
+        let d = &law.distance_m;
+        let se = d.mean_std_error.expect("a standard error");
+        let z = (d.mean - truth.distance_m.mean) / se;
+        eprintln!(
+            "{what} {name}: expected count / truth at MOR {mors:?}: {ratios:.3?}; distance mean {:.3} ± {se:.3} (truth {:.3}, z {z:+.2}), std {:.3} (truth {:.3}); visible {:.3}",
+            d.mean,
+            truth.distance_m.mean,
+            d.std,
+            truth.distance_m.std,
+            law.visible_fraction.unwrap_or(f64::NAN)
+        );
+        for (m, r) in mors.iter().zip(&ratios) {
+            if (r - 1.0).abs() > 0.15 {
+                errors.push(format!(
+                    "{what} {name}: count at MOR {m} m {r:.3} × the truth"
+                ));
+            }
+        }
+        if z.abs() > 3.0 {
+            errors.push(format!(
+                "{what} {name}: distance mean {z:+.2} standard errors off"
+            ));
+        }
+    }
+    errors
+}
+
+/// Near-range laws on a real scene (issue #12's semi-real source): the
+/// real VLP-16 revolutions (its mount and walls within 1–3 m of the sensor
+/// on most rays), weathered by the ground-truth fog model, whose ghost and
+/// ring returns fall on any firing and are hidden behind nearer returns.
+/// Where the scene is near, a weather return at the distance of a clear
+/// return of its cell or a neighbour is paired or called scene, not
+/// counted; the fit sees the laws through that mask as through the
+/// occluders. Expected counts within 15 % of the truth at three MORs and
+/// distance means within three standard errors, on three seeds (measured:
+/// counts 0.91–1.09 of the truth, distance means within 1.8 standard
+/// errors). Without the mask the counts came out 0.62–0.67 (ring) and
+/// 0.76–0.84 (ghost) of the truth on these seeds, outside their
+/// intervals. (murk's generator is the other source:
+/// `default_campaign_laws_are_pinned_down_or_say_why` and the coverage
+/// tests.) Skips without `../shared/data/real`.
+#[test]
+fn near_range_laws_on_a_real_scene_recover_the_truth() {
+    use murk_fixtures::semi_real::{self, SemiRealConfig};
+    let Some(capture) = semi_real::vlp16_capture(env!("CARGO_MANIFEST_DIR")) else {
+        return;
+    };
+    let mors = [30.0, 60.0, 120.0];
+    let mut errors = Vec::new();
+    for seed in [21, 22, 23] {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("semi-real");
+        let cfg = SemiRealConfig {
+            declared_azimuth_deg: 0.4,
+            interleave_revolutions: true,
+            ..SemiRealConfig::default()
+        };
+        semi_real::vlp16_campaign(&capture, &out, &cfg, seed).unwrap();
+        let t = fit(&out).table().clone();
+        errors.extend(near_range_against_truth(
+            &t,
+            &cfg.model,
+            &mors,
+            &format!("VLP-16 seed {seed}"),
+        ));
+    }
+    assert!(errors.is_empty(), "{errors:#?}");
+}
