@@ -9,8 +9,9 @@
 //! least the relevance threshold (strength ≥ 1). Sources: generated
 //! campaigns (56 recordings at 1°, three quarters in the weather; fog seeds
 //! 41–43 and rain seed 44), and the semi-real source (the real VLP-16
-//! revolutions weathered by the ground-truth fog model), when the capture
-//! is present. Tolerance: no seed may flag count × MOR.
+//! revolutions weathered by the ground-truth fog model, spread over the
+//! capture), when the capture is present. Tolerance: no seed may flag
+//! count × MOR nor a count along the rays.
 
 use murk_campaign::Campaign;
 use murk_diagnose::{DiagnoseParams, Diagnosis};
@@ -131,14 +132,16 @@ fn null_campaigns_show_no_count_along_mor() {
         eprintln!("{line}");
         lines.push(line);
         flagged += usize::from(f);
-        // Not a null along the rays: the capture's own near-range returns
-        // differ between its revolutions (about 200 more at 3–6 m in the
-        // last ones), so with the clear revolutions spread over the capture
-        // count × range and × azimuth are right about these data (flagged
-        // at seed 45, strengths 1.60 and 1.20; see murk-diagnose's lib
-        // docs). Printed only.
-        let (line, _) = count_rays(&d, "semi-real fog seed 45");
+        // Nothing along the rays either. (Flagged before — count × range
+        // 1.60, × azimuth 1.20 — while the fixture drew the weather's
+        // returns only on firings with a scene return, fit's count laws
+        // did not see the near scene's mask, and the point tests read a
+        // log ratio biased low in sparse bins; see murk-diagnose's lib
+        // docs.)
+        let (line, f) = count_rays(&d, "semi-real fog seed 45");
         eprintln!("{line}");
+        lines.push(line);
+        flagged += usize::from(f);
     }
     assert_eq!(flagged, 0, "{lines:#?}");
 }
