@@ -12,7 +12,7 @@
 use std::collections::BTreeMap;
 
 use crate::FitValidParams;
-use crate::pairing::RecordingTally;
+use crate::pairing::{RecordingTally, SceneSpans};
 use crate::reference::ClearReference;
 use crate::stats::truncnorm::Histogram;
 use crate::survival::{Partition, SurvivalHistogram};
@@ -69,6 +69,28 @@ fn add_stretches(out: &mut [u64], step: f64, stretches: &[(f32, f32)], weight: u
     }
 }
 
+/// Share of rays on which a weather return would be seen and counted, per
+/// step of `step` metres: open (`1 − Σ occluders before the step / rays`)
+/// and not masked (`masked[k]`, lengths in [`MASK_UNIT_M`], over the step).
+fn visible_shares(
+    occluders: impl Iterator<Item = u64>,
+    masked: &[u64],
+    step: f64,
+    rays: f64,
+) -> Vec<f64> {
+    let per_ray = step / MASK_UNIT_M;
+    let mut acc = 0u64;
+    occluders
+        .enumerate()
+        .map(|(k, c)| {
+            let m = masked.get(k).copied().unwrap_or(0) as f64 / per_ray;
+            let v = 1.0 - (acc as f64 + m) / rays;
+            acc += c;
+            v.max(0.0)
+        })
+        .collect()
+}
+
 /// The scalars of one recording.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct RecordingRow {
@@ -101,7 +123,7 @@ pub struct RecordingRow {
     /// Length of this recording's rays masked by the near scene, per step
     /// of `ROW_OCCLUDER_STEP_M` (in `MASK_UNIT_M`, 0.1 mm): the stretches in front
     /// of each ray's first return where a weather return would pair or fall
-    /// in a clear envelope ([`RecordingTally::masked`]), each counted once
+    /// in a clear envelope (`pairing::masked_stretches`), each counted once
     /// per scan and revolution of the ray. Divided by the step, the rays
     /// masked there, on average over the step.
     pub masked: Vec<u64>,
@@ -148,19 +170,12 @@ impl RecordingRow {
     /// open (no return nearer than the step's start) and not masked by the
     /// near scene (on average over the step).
     pub fn open_rays(&self) -> Vec<f64> {
-        let rays = self.rays.max(1) as f64;
-        let per_ray = ROW_OCCLUDER_STEP_M / MASK_UNIT_M;
-        let mut acc = 0u64;
-        self.occluders
-            .iter()
-            .enumerate()
-            .map(|(k, &c)| {
-                let masked = self.masked.get(k).copied().unwrap_or(0) as f64 / per_ray;
-                let v = 1.0 - (acc as f64 + masked) / rays;
-                acc += c as u64;
-                v.max(0.0)
-            })
-            .collect()
+        visible_shares(
+            self.occluders.iter().map(|&c| c as u64),
+            &self.masked,
+            ROW_OCCLUDER_STEP_M,
+            self.rays.max(1) as f64,
+        )
     }
 }
 
@@ -235,8 +250,14 @@ impl NoiseAcc {
         }
     }
 
-    fn add(&mut self, points: &[(f32, f32)], tally: &RecordingTally, rays: u64, per_cell: u64) {
-        let occluders = &tally.occluders;
+    fn add(
+        &mut self,
+        points: &[(f32, f32)],
+        occluders: &[f32],
+        masked: &[(f32, f32)],
+        rays: u64,
+        per_cell: u64,
+    ) {
         for &(r, f) in points {
             self.distance.add(r as f64);
             self.reflectivity.add(f as f64);
@@ -253,12 +274,7 @@ impl NoiseAcc {
                 self.occluders[k] += w;
             }
         }
-        add_stretches(
-            &mut self.masked,
-            OCCLUDER_STEP_M,
-            &tally.masked,
-            w * per_cell,
-        );
+        add_stretches(&mut self.masked, OCCLUDER_STEP_M, masked, w * per_cell);
     }
 
     fn merge(&mut self, o: &NoiseAcc) {
@@ -281,21 +297,12 @@ impl NoiseAcc {
         if self.exposure == 0 {
             return None;
         }
-        let exposure = self.exposure as f64;
-        let per_ray = OCCLUDER_STEP_M / MASK_UNIT_M;
-        let mut acc = 0u64;
-        Some(
-            self.occluders
-                .iter()
-                .enumerate()
-                .map(|(k, &c)| {
-                    let masked = self.masked.get(k).copied().unwrap_or(0) as f64 / per_ray;
-                    let v = 1.0 - (acc as f64 + masked) / exposure;
-                    acc += c;
-                    v.max(0.0)
-                })
-                .collect(),
-        )
+        Some(visible_shares(
+            self.occluders.iter().copied(),
+            &self.masked,
+            OCCLUDER_STEP_M,
+            self.exposure as f64,
+        ))
     }
 }
 
@@ -328,11 +335,13 @@ pub struct CellTable {
     rays: u64,
     /// Revolutions per scan.
     revolutions: u64,
+    /// Each cell's scene span, for the masked stretches.
+    pub(crate) scene: SceneSpans,
 }
 
 impl CellTable {
     /// Class and `ln r` of every reference cell.
-    pub fn new(reference: &ClearReference, partition: &Partition) -> Self {
+    pub fn new(reference: &ClearReference, partition: &Partition, params: &FitValidParams) -> Self {
         let cells = reference.present().to_vec();
         CellTable {
             class: cells
@@ -350,6 +359,7 @@ impl CellTable {
                 .collect(),
             rays: reference.grid().cells() as u64 * reference.revolutions() as u64,
             revolutions: reference.revolutions() as u64,
+            scene: SceneSpans::new(reference, params),
             cells,
             n_cells: reference.grid().cells(),
         }
@@ -377,6 +387,7 @@ impl WeatherAcc {
         mor: f64,
         rain_rate: Option<f64>,
         tally: &RecordingTally,
+        masked: &[(f32, f32)],
         cells: &CellTable,
         params: &FitValidParams,
         range_scale: f64,
@@ -431,12 +442,14 @@ impl WeatherAcc {
         // Each cell's masked stretches stand for its rays: one per scan and
         // revolution.
         let per_cell = frames as u64 * cells.revolutions.max(1);
-        self.ghost.add(&tally.ghosts, tally, rays, per_cell);
-        self.ring.add(&tally.rings, tally, rays, per_cell);
+        self.ghost
+            .add(&tally.ghosts, &tally.occluders, masked, rays, per_cell);
+        self.ring
+            .add(&tally.rings, &tally.occluders, masked, rays, per_cell);
         let reach = params.noise_reach_m();
         let mut occluders = vec![0u32; (reach / ROW_OCCLUDER_STEP_M).ceil().max(1.0) as usize];
-        let mut masked = vec![0u64; occluders.len()];
-        add_stretches(&mut masked, ROW_OCCLUDER_STEP_M, &tally.masked, per_cell);
+        let mut row_masked = vec![0u64; occluders.len()];
+        add_stretches(&mut row_masked, ROW_OCCLUDER_STEP_M, masked, per_cell);
         for &r in &tally.occluders {
             let k = (r as f64 / ROW_OCCLUDER_STEP_M).floor().max(0.0) as usize;
             if let Some(o) = occluders.get_mut(k) {
@@ -464,7 +477,7 @@ impl WeatherAcc {
             far: tally.far,
             points: tally.points,
             occluders,
-            masked,
+            masked: row_masked,
             rays,
             frames,
             revolutions: frames as u64 * cells.revolutions.max(1),

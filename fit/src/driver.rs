@@ -34,7 +34,7 @@ use sha2::{Digest, Sha256};
 use crate::accumulate::{CellTable, WeatherAcc};
 use crate::geometry::GeometryAcc;
 use crate::images::{ClearImages, StoredImage};
-use crate::pairing::pair_frames;
+use crate::pairing::{masked_stretches, pair_frames};
 use crate::radar::Detections;
 use crate::reference::{CellGrid, CellImage, CellPoint, ClearReference, cell_points};
 use crate::survival::Partition;
@@ -468,7 +468,7 @@ pub fn accumulate_degraded(
     partition: &Partition,
     params: &FitValidParams,
 ) -> Result<Accumulated, FitError> {
-    let cells = CellTable::new(reference, partition);
+    let cells = CellTable::new(reference, partition, params);
     let grid = reference.grid();
     let rs = inputs.lidar.range_scale;
     let states = worker_pool(
@@ -488,6 +488,7 @@ pub fn accumulate_degraded(
                 return Ok(());
             }
             let tally = pair_frames(reference, &points, frames, params);
+            let masked = masked_stretches(reference, &cells.scene, &points);
             s.accs
                 .entry(job.input.class)
                 .or_insert_with(|| WeatherAcc::new(params, partition))
@@ -497,6 +498,7 @@ pub fn accumulate_degraded(
                     job.mor,
                     job.input.rain_rate,
                     &tally,
+                    &masked,
                     &cells,
                     params,
                     rs,

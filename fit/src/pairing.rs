@@ -53,15 +53,6 @@ pub struct RecordingTally {
     /// closer than the ghost window's far end: what can hide a weather return
     /// placed behind it on the same ray.
     pub occluders: Vec<f32>,
-    /// Stretches `[from, to)` of the recording's rays, nearer than the noise
-    /// windows' far end and than the ray's first return, where a weather
-    /// return would not be counted as one: it would pair with a clear
-    /// return of its cell or a neighbour's, or fall inside their clear
-    /// envelope (*scene*). A scene with targets near the sensor masks the
-    /// weather's near returns in front of them; the count and distance laws
-    /// see the weather through what is left (`masked_stretches`). One entry
-    /// per cell and stretch, for every scan of the recording alike.
-    pub masked: Vec<(f32, f32)>,
 }
 
 impl RecordingTally {
@@ -214,23 +205,55 @@ fn pair(
         .filter(|p| p.range < reach)
         .map(|p| p.range)
         .collect();
-    t.masked = masked_stretches(reference, points, params, reach);
     t
 }
 
-/// [`RecordingTally::masked`]: for every cell of the grid, the union of its
-/// own and its azimuth neighbours' [`ClearReference::scene_span`]s (the
-/// cells pairing offers a return to), clipped to `[0, reach)` and cut at
-/// the cell's first return in this recording (behind it the ray is hidden,
-/// which the occluders already count). Computed from the reference on
-/// every recording rather than stored with it: a few operations per cell,
-/// and the reference's format stays as it is. A recording of several
-/// scans is cut at its nearest return per cell over them all.
-fn masked_stretches(
-    reference: &ClearReference,
-    points: &[CellPoint],
-    params: &FitValidParams,
+/// Per cell of a reference, its [`ClearReference::scene_span`] when it
+/// starts nearer than the noise windows' far end (NaN otherwise): what
+/// [`masked_stretches`] reads, computed once per reference.
+#[derive(Debug, Clone)]
+pub(crate) struct SceneSpans {
+    spans: Vec<[f32; 2]>,
     reach: f32,
+    neighbours: i64,
+}
+
+impl SceneSpans {
+    /// The spans of `reference`'s cells under `params`.
+    pub(crate) fn new(reference: &ClearReference, params: &FitValidParams) -> SceneSpans {
+        let reach = params.noise_reach_m() as f32;
+        SceneSpans {
+            spans: (0..reference.grid().cells())
+                .map(|c| {
+                    reference
+                        .scene_span(c, params)
+                        .filter(|s| s[0] < reach)
+                        .unwrap_or([f32::NAN; 2])
+                })
+                .collect(),
+            reach,
+            neighbours: params.azimuth_neighbours() as i64,
+        }
+    }
+}
+
+/// Stretches `[from, to)` of a recording's rays, nearer than the noise
+/// windows' far end and than the ray's first return, where a weather return
+/// would not be counted as one: it would pair with a clear return of its
+/// cell or a neighbour's, or fall inside their clear envelope (*scene*). A
+/// scene with targets near the sensor masks the weather's near returns in
+/// front of them; the count and distance laws see the weather through what
+/// is left. For every cell of the grid: the union of its own and its
+/// azimuth neighbours' spans (the cells pairing offers a return to),
+/// clipped to `[0, reach)` and cut at the cell's first return in `points`
+/// (behind it the ray is hidden, which the occluders already count). One
+/// entry per cell and stretch, for every scan of the recording alike (a
+/// recording of several scans is cut at its nearest return per cell over
+/// them all).
+pub(crate) fn masked_stretches(
+    reference: &ClearReference,
+    spans: &SceneSpans,
+    points: &[CellPoint],
 ) -> Vec<(f32, f32)> {
     let grid = reference.grid();
     let mut first = vec![f32::INFINITY; grid.cells()];
@@ -238,23 +261,14 @@ fn masked_stretches(
         let f = &mut first[p.cell as usize];
         *f = f.min(p.range);
     }
-    // Each cell's span once (NaN: none, or none nearer than `reach`).
-    let spans: Vec<[f32; 2]> = (0..grid.cells())
-        .map(|c| {
-            reference
-                .scene_span(c, params)
-                .filter(|s| s[0] < reach)
-                .unwrap_or([f32::NAN; 2])
-        })
-        .collect();
-    let k = params.azimuth_neighbours() as i64;
+    let k = spans.neighbours;
     let mut here: Vec<[f32; 2]> = Vec::with_capacity(2 * k as usize + 1);
     let mut out = Vec::new();
     for (cell, &f) in first.iter().enumerate() {
-        let end = f.min(reach);
+        let end = f.min(spans.reach);
         here.clear();
         for off in -k..=k {
-            let [a, b] = spans[grid.shifted(cell, off)];
+            let [a, b] = spans.spans[grid.shifted(cell, off)];
             if a.is_finite() {
                 let (a, b) = (a.max(0.0), b.min(end));
                 if a < b {
@@ -369,9 +383,9 @@ mod tests {
         let p = FitParams::default().check().unwrap();
         assert_eq!(r.tolerance(0, &p), 1.0);
         assert_eq!(r.tolerance(3, &p), 1.0);
-        let t = pair_recording(&r, &[pt(6, 7.0)], &p);
+        let spans = SceneSpans::new(&r, &p);
         assert_eq!(
-            t.masked,
+            masked_stretches(&r, &spans, &[pt(6, 7.0)]),
             vec![
                 (9.0, 10.0), // cell 0 (10 m)
                 (9.0, 10.0), // cell 1: neighbour 0
@@ -393,8 +407,8 @@ mod tests {
     fn masked_stretches_are_where_pairing_does_not_count_weather() {
         let r = reference();
         let p = FitParams::default().check().unwrap();
-        let empty = pair_recording(&r, &[], &p);
-        let stretch = |cell: usize| empty.masked[cell];
+        let empty = masked_stretches(&r, &SceneSpans::new(&r, &p), &[]);
+        let stretch = |cell: usize| empty[cell];
         for cell in 0..8u32 {
             for i in 0..200 {
                 let d = 0.025 + 0.05 * i as f32;
